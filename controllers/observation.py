@@ -1,0 +1,178 @@
+"""What a controller sees each control step: the seam between a world and a law.
+
+All arrays are numpy, SI units. ``m`` is the space dimension (1, 2 or 3; the
+road uses m = 2 with axis 0 = longitudinal ``s`` and axis 1 = lateral ``d``,
+positive to the left). A world (the plane world or the SUMO adapter) builds one
+:class:`Observation` per step; a controller returns ``u`` with shape (N, m).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+class InvalidStateError(ValueError):
+    """A NaN or infinite state entered a controller; the message names the agent."""
+
+
+@dataclass(frozen=True)
+class Walls:
+    """Infinite straight walls (seed 003 eq. 5): a point ``y`` on each and its unit normal.
+
+    Shapes: ``points`` (K, m) in m, ``normals`` (K, m) unit vectors pointing
+    into the free space (towards the agents).
+    """
+
+    points: np.ndarray
+    normals: np.ndarray
+
+    def __post_init__(self) -> None:
+        pts = np.atleast_2d(np.asarray(self.points, dtype=float))
+        nrm = np.atleast_2d(np.asarray(self.normals, dtype=float))
+        if pts.shape != nrm.shape:
+            raise ValueError(f"walls: points {pts.shape} and normals {nrm.shape} differ")
+        norms = np.linalg.norm(nrm, axis=1)
+        if np.any(norms <= 0):
+            raise ValueError("walls: a normal has zero length")
+        object.__setattr__(self, "points", pts)
+        object.__setattr__(self, "normals", nrm / norms[:, None])
+
+
+@dataclass(frozen=True)
+class Circles:
+    """Circular (spherical) obstacles: centres ``y_k`` (K, m) in m and radii ``R_k`` (K,) in m."""
+
+    centres: np.ndarray
+    radii: np.ndarray
+
+    def __post_init__(self) -> None:
+        c = np.atleast_2d(np.asarray(self.centres, dtype=float))
+        r = np.atleast_1d(np.asarray(self.radii, dtype=float))
+        if c.shape[0] != r.shape[0]:
+            raise ValueError(f"circles: {c.shape[0]} centres but {r.shape[0]} radii")
+        if np.any(r <= 0):
+            raise ValueError("circles: radius must be > 0")
+        object.__setattr__(self, "centres", c)
+        object.__setattr__(self, "radii", r)
+
+
+@dataclass(frozen=True)
+class Observation:
+    """One control step's view of the world.
+
+    Attributes:
+        q: (N, m) positions of the controlled alpha-agents, m.
+        p: (N, m) velocities, m/s.
+        t: time, s.
+        dt: control step, s.
+        ids: (N,) vehicle ids (any hashable); defaults to 0..N-1.
+        length, width: (N,) body sizes of the agents, m (None: points).
+        others_q, others_p: (M, m) sensed but non-cooperating road users
+            (human-driven vehicles, stopped vehicles), treated as rectangles.
+        others_length, others_width: (M,) their sizes, m.
+        circles: circular obstacles, or None.
+        walls: straight walls, or None.
+        road_edges: (N, 2) lateral positions of the right and left road edge
+            at each agent's longitudinal position, m (road frame only).
+        leader_q, leader_p: gamma-agent position (m,) or per-agent (N, m), m and m/s.
+        period_s: length of a periodic axis 0 (ring road), m, or None.
+    """
+
+    q: np.ndarray
+    p: np.ndarray
+    t: float = 0.0
+    dt: float = 0.1
+    ids: np.ndarray | None = None
+    length: np.ndarray | None = None
+    width: np.ndarray | None = None
+    others_q: np.ndarray | None = None
+    others_p: np.ndarray | None = None
+    others_length: np.ndarray | None = None
+    others_width: np.ndarray | None = None
+    circles: Circles | None = None
+    walls: Walls | None = None
+    road_edges: np.ndarray | None = None
+    leader_q: np.ndarray | None = None
+    leader_p: np.ndarray | None = None
+    period_s: float | None = None
+    extras: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        q = np.asarray(self.q, dtype=float)
+        p = np.asarray(self.p, dtype=float)
+        if q.ndim != 2:
+            raise ValueError(f"q must have shape (N, m), got {q.shape}")
+        if p.shape != q.shape:
+            raise ValueError(f"p has shape {p.shape} but q has shape {q.shape}")
+        if q.shape[1] not in (1, 2, 3):
+            raise ValueError(f"space dimension m must be 1, 2 or 3, got {q.shape[1]}")
+        object.__setattr__(self, "q", q)
+        object.__setattr__(self, "p", p)
+        n = q.shape[0]
+        if self.ids is None:
+            object.__setattr__(self, "ids", np.arange(n))
+        elif len(self.ids) != n:
+            raise ValueError(f"ids has {len(self.ids)} entries for {n} agents")
+        for name in ("length", "width"):
+            v = getattr(self, name)
+            if v is not None:
+                v = np.broadcast_to(np.asarray(v, dtype=float), (n,))
+                object.__setattr__(self, name, v)
+        if self.others_q is not None:
+            oq = np.asarray(self.others_q, dtype=float).reshape(-1, q.shape[1])
+            op = (
+                np.zeros_like(oq)
+                if self.others_p is None
+                else np.asarray(self.others_p, dtype=float).reshape(oq.shape)
+            )
+            object.__setattr__(self, "others_q", oq)
+            object.__setattr__(self, "others_p", op)
+            for name in ("others_length", "others_width"):
+                v = getattr(self, name)
+                v = np.zeros(len(oq)) if v is None else np.asarray(v, dtype=float)
+                object.__setattr__(self, name, np.broadcast_to(v, (len(oq),)))
+        if self.road_edges is not None:
+            re = np.asarray(self.road_edges, dtype=float)
+            re = np.broadcast_to(re, (n, 2)) if re.shape == (2,) else re
+            if re.shape != (n, 2):
+                raise ValueError(f"road_edges must have shape ({n}, 2), got {re.shape}")
+            object.__setattr__(self, "road_edges", re)
+        for name in ("leader_q", "leader_p"):
+            v = getattr(self, name)
+            if v is not None:
+                v = np.asarray(v, dtype=float)
+                if v.shape not in ((q.shape[1],), q.shape):
+                    raise ValueError(f"{name} must have shape ({q.shape[1]},) or {q.shape}")
+                object.__setattr__(self, name, v)
+        if self.period_s is not None and not self.period_s > 0:
+            raise ValueError("period_s must be > 0")
+
+    @property
+    def n(self) -> int:
+        """Number of controlled agents N."""
+        return self.q.shape[0]
+
+    @property
+    def m(self) -> int:
+        """Space dimension m."""
+        return self.q.shape[1]
+
+    def check_finite(self) -> None:
+        """Raise :class:`InvalidStateError` naming the first agent with a NaN/inf state."""
+        bad = ~(np.isfinite(self.q).all(axis=1) & np.isfinite(self.p).all(axis=1))
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise InvalidStateError(
+                f"agent {self.ids[i]!r} has a non-finite state: q={self.q[i]}, p={self.p[i]}"
+            )
+
+    def relative(self, dq: np.ndarray) -> np.ndarray:
+        """Wrap relative positions ``dq`` (..., m) along a periodic axis 0, m."""
+        if self.period_s is None:
+            return dq
+        out = np.array(dq, dtype=float, copy=True)
+        L = self.period_s
+        out[..., 0] = (out[..., 0] + 0.5 * L) % L - 0.5 * L
+        return out

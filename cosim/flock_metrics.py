@@ -1,0 +1,143 @@
+"""Flock metrics from positions (N, m) in m and velocities (N, m) in m/s.
+
+Pure numpy/scipy; neighbour queries use a KD-tree, never N x N arrays.
+Sources:
+* OS06: R. Olfati-Saber, IEEE TAC 51(3), 2006 — deviation energy (eq. 7),
+  velocity mismatch (kinetic energy of relative velocities, Sec. VIII),
+  connectivity of the proximity net (Sec. II).
+* Seed 003 (Sec. 4): minimum distance between agents and to obstacle points.
+* Seed 004 (MATLAB "Calculate metrics"): average nearest-neighbour distance,
+  velocity alignment and group dispersion ``sqrt(var(x) + var(y))``. The seed's
+  alignment line compares each unit velocity with itself (always 1); we use
+  the intended order parameter ``||mean(p_i / ||p_i||)||`` (Vicsek et al. 1995).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from controllers.neighbours import neighbour_pairs, tree_points
+from controllers.observation import Circles, Walls
+
+
+def nearest_neighbour_distances(q: np.ndarray, period: float | None = None) -> np.ndarray:
+    """Distance from each agent to its nearest other agent, (N,) m (inf if N < 2)."""
+    if len(q) < 2:
+        return np.full(len(q), np.inf)
+    pts, box = tree_points(np.asarray(q, dtype=float), 1.0, period)
+    dist, _ = cKDTree(pts, boxsize=box).query(pts, k=2)
+    return dist[:, 1]
+
+
+def min_pair_distance(q: np.ndarray, period: float | None = None) -> float:
+    """Minimum centre distance between any two agents, m (seed 003 Fig. "minimum distance")."""
+    return float(np.min(nearest_neighbour_distances(q, period))) if len(q) > 1 else np.inf
+
+
+def average_nn_distance(q: np.ndarray, period: float | None = None) -> float:
+    """Mean over agents of the nearest-neighbour distance, m (seed 004 avg_neighbor_distance)."""
+    return float(np.mean(nearest_neighbour_distances(q, period))) if len(q) > 1 else np.nan
+
+
+def min_obstacle_distance(
+    q: np.ndarray, circles: Circles | None = None, walls: Walls | None = None
+) -> float:
+    """Minimum distance from any agent to a circle's surface or a wall, m (negative: inside)."""
+    best = np.inf
+    if circles is not None and len(circles.radii):
+        for y, r in zip(circles.centres, circles.radii, strict=True):
+            best = min(best, float(np.min(np.linalg.norm(q - y, axis=1) - r)))
+    if walls is not None and len(walls.points):
+        for y, a in zip(walls.points, walls.normals, strict=True):
+            best = min(best, float(np.min((q - y) @ a)))
+    return best
+
+
+def velocity_mismatch(p: np.ndarray, p_ref: np.ndarray | None = None) -> float:
+    """Mean squared velocity deviation ``(1/N) sum ||p_i - p_c||^2``, m^2/s^2.
+
+    ``p_c`` is the flock's mean velocity, or ``p_ref`` (the leader's) when given:
+    twice the kinetic energy of relative motion per agent (OS06 Sec. VIII).
+    """
+    if len(p) == 0:
+        return np.nan
+    c = p.mean(axis=0) if p_ref is None else np.asarray(p_ref)
+    return float(np.mean(np.sum((p - c) ** 2, axis=1)))
+
+
+def deviation_energy(q: np.ndarray, d: float, r: float, period: float | None = None) -> float:
+    """Lattice deviation energy ``E = 1/(|E|+1) sum_(i,j in E) (||q_j - q_i|| - d)^2``, m^2.
+
+    OS06 eq. 7 with the proximity net of range ``r`` (directed edges, so each
+    undirected pair counts twice in the sum and in ``|E|``). Zero for a perfect
+    alpha-lattice.
+    """
+    pairs = neighbour_pairs(q, r, period, "auto")
+    if len(pairs) == 0:
+        return 0.0
+    dq = q[pairs[:, 1]] - q[pairs[:, 0]]
+    if period is not None:
+        dq[:, 0] = (dq[:, 0] + 0.5 * period) % period - 0.5 * period
+    dev = np.linalg.norm(dq, axis=1) - d
+    return float(2.0 * np.sum(dev**2) / (2 * len(pairs) + 1))
+
+
+def velocity_alignment(p: np.ndarray) -> float:
+    """Order parameter ``||(1/N) sum p_i / ||p_i||||`` in [0, 1] (1: all headings equal)."""
+    speed = np.linalg.norm(p, axis=1)
+    moving = speed > 1e-12
+    if not moving.any():
+        return np.nan
+    return float(np.linalg.norm(np.mean(p[moving] / speed[moving, None], axis=0)))
+
+
+def dispersion(q: np.ndarray) -> float:
+    """Group spatial dispersion ``sqrt(sum_k var(q[:, k]))``, m (seed 004; sample variance)."""
+    if len(q) < 2:
+        return 0.0
+    return float(np.sqrt(np.sum(np.var(q, axis=0, ddof=1))))
+
+
+def connectivity(q: np.ndarray, r: float, period: float | None = None) -> tuple[int, float]:
+    """Proximity-graph connectivity: (number of components, largest component share).
+
+    Graph edges join agents closer than ``r`` (m), OS06's proximity net.
+    """
+    n = len(q)
+    if n == 0:
+        return 0, np.nan
+    pairs = neighbour_pairs(q, r, period, "auto")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    k, labels = connected_components(graph, directed=False)
+    return int(k), float(np.bincount(labels).max() / n)
+
+
+def flock_metrics(
+    q: np.ndarray,
+    p: np.ndarray,
+    d: float,
+    r: float,
+    p_ref: np.ndarray | None = None,
+    circles: Circles | None = None,
+    walls: Walls | None = None,
+    period: float | None = None,
+) -> dict[str, float]:
+    """All flock metrics of one instant, keyed by column name (units in the name)."""
+    n_comp, largest = connectivity(q, r, period)
+    return {
+        "min_agent_distance_m": min_pair_distance(q, period),
+        "min_obstacle_distance_m": min_obstacle_distance(q, circles, walls),
+        "velocity_mismatch_m2ps2": velocity_mismatch(p),
+        "leader_velocity_mismatch_m2ps2": (
+            velocity_mismatch(p, p_ref) if p_ref is not None else np.nan
+        ),
+        "deviation_energy_m2": deviation_energy(q, d, r, period),
+        "avg_nn_distance_m": average_nn_distance(q, period),
+        "velocity_alignment": velocity_alignment(p),
+        "dispersion_m": dispersion(q),
+        "n_components": n_comp,
+        "largest_component_share": largest,
+    }
