@@ -1,0 +1,197 @@
+"""Safety layer for road vehicles: clips a command only when it is unsafe.
+
+Pure numpy, road frame (axis 0 = ``s`` along the road, axis 1 = ``d`` across,
+left positive), vehicles are rectangles centred at ``(s, d)``.
+
+Rules, applied in this order to CAV ``i`` with command ``u_i``:
+
+1. **Road edges** (lateral): the next lateral position keeps the body at
+   least ``edge_margin`` inside the road, and the lateral speed towards an
+   edge never exceeds ``sqrt(2 a_lat g)`` with ``g`` the remaining distance, so
+   the vehicle can always stop laterally before the edge.
+2. **Side clearance** (lateral): vehicles that overlap longitudinally (with a
+   speed-dependent buffer ahead and behind) bound the next lateral position so
+   that the side-to-side clearance stays above ``lateral_clearance``; a vehicle
+   never moves sideways into a gap that is already too small.
+3. **Safe speed** (longitudinal, Krauss 1998 / SUMO's default model): with
+   ``g`` the bumper-to-bumper gap minus ``min_gap`` to the nearest vehicle
+   ahead that overlaps laterally anywhere along the lateral move, the next speed
+   is at most ``v_safe = -b tau + sqrt((b tau)^2 + v_l^2 b / b_l + 2 b g)``,
+   which lets the CAV stop behind a leader braking at ``b_l`` after one
+   reaction delay ``tau``, braking itself at ``b`` (the emergency deceleration).
+
+Every activation is counted per rule.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .neighbours import cross_pairs
+
+
+@dataclass
+class SafetyConfig:
+    """Parameters (SI). See module docstring for the rules."""
+
+    dt: float = 0.1
+    reaction_steps: int = 1
+    min_gap_m: float = 2.0
+    lateral_clearance_m: float = 0.3
+    edge_margin_m: float = 0.1
+    own_decel_mps2: float = 9.0
+    leader_decel_mps2: float = 9.0
+    lat_accel_mps2: float = 1.5
+    lat_speed_max_mps: float = 1.5
+    cut_in_time_s: float = 1.0
+
+    @property
+    def tau(self) -> float:
+        return self.reaction_steps * self.dt
+
+
+@dataclass
+class SafetyCounts:
+    """Agent-steps in which each rule changed the command."""
+
+    edge: int = 0
+    side: int = 0
+    speed: int = 0
+    seen: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        return {
+            "safety_edge_activations": self.edge,
+            "safety_side_activations": self.side,
+            "safety_speed_activations": self.speed,
+            "safety_agent_steps": self.seen,
+        }
+
+
+@dataclass
+class RoadState:
+    """All vehicles on the road (M of them), SI units.
+
+    ``s``, ``d`` (M,) centre positions, m; ``v`` (M,) longitudinal speed, m/s;
+    ``length``, ``width`` (M,) m.
+    """
+
+    s: np.ndarray
+    d: np.ndarray
+    v: np.ndarray
+    length: np.ndarray
+    width: np.ndarray
+
+
+@dataclass
+class SafetyLayer:
+    """Clip CAV commands for safety; ``apply`` returns the safe command and next lateral state."""
+
+    config: SafetyConfig = field(default_factory=SafetyConfig)
+    counts: SafetyCounts = field(default_factory=SafetyCounts)
+
+    def apply(
+        self,
+        u: np.ndarray,
+        cav_index: np.ndarray,
+        v_lat: np.ndarray,
+        road: RoadState,
+        edges: np.ndarray,
+        period: float | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Safe command for the CAVs.
+
+        Args:
+            u: (N, 2) commanded accelerations, m/s^2.
+            cav_index: (N,) rows of the CAVs in ``road``.
+            v_lat: (N,) current lateral speeds of the CAVs, m/s.
+            road: all vehicles, CAVs included.
+            edges: (N, 2) right and left road edge at each CAV, m.
+            period: ring length, m, or None.
+
+        Returns:
+            (u_safe (N, 2), v_lat_next (N,)): the longitudinal acceleration to
+            apply and the lateral speed for the next step (m/s).
+        """
+        c = self.config
+        dt = c.dt
+        n = len(cav_index)
+        u = np.array(u, dtype=float, copy=True)
+        self.counts.seen += n
+        if n == 0:
+            return u, np.zeros(0)
+        s, d, v = road.s[cav_index], road.d[cav_index], road.v[cav_index]
+        L, W = road.length[cav_index], road.width[cav_index]
+
+        # 1. road edges ------------------------------------------------------------
+        vl = np.clip(v_lat + u[:, 1] * dt, -c.lat_speed_max_mps, c.lat_speed_max_mps)
+        lo = edges[:, 0] + 0.5 * W + c.edge_margin_m
+        hi = edges[:, 1] - 0.5 * W - c.edge_margin_m
+        room_left = np.maximum(hi - d, 0.0)
+        room_right = np.maximum(d - lo, 0.0)
+        cap_left = np.sqrt(2.0 * c.lat_accel_mps2 * room_left)
+        cap_right = np.sqrt(2.0 * c.lat_accel_mps2 * room_right)
+        vl_edge = np.clip(vl, -cap_right, cap_left)
+        d_next = d + vl_edge * dt
+        d_next = np.clip(d_next, np.minimum(lo, d), np.maximum(hi, d))
+        vl_edge = (d_next - d) / dt
+        self.counts.edge += int(np.count_nonzero(np.abs(vl_edge - vl) > 1e-9))
+
+        # neighbours within a longitudinal reach ------------------------------------
+        reach = float(np.max(v)) * c.tau + float(np.max(v)) ** 2 / (2 * c.own_decel_mps2)
+        reach += float(np.max(road.length)) + c.min_gap_m + 10.0
+        xy_all = np.column_stack([road.s, road.d])
+        pairs = cross_pairs(np.column_stack([s, d]), xy_all, reach, period)
+        pairs = pairs[cav_index[pairs[:, 0]] != pairs[:, 1]]
+        i, j = pairs[:, 0], pairs[:, 1]
+        ds = road.s[j] - s[i]
+        if period is not None:
+            ds = (ds + 0.5 * period) % period - 0.5 * period
+        half_l = 0.5 * (L[i] + road.length[j])
+        half_w = 0.5 * (W[i] + road.width[j])
+
+        # 2. side clearance ----------------------------------------------------------
+        # Longitudinal overlap with a buffer for closing speed (cut-in protection).
+        closing_ahead = np.maximum(v[i] - road.v[j], 0.0)  # i catches j ahead
+        closing_behind = np.maximum(road.v[j] - v[i], 0.0)  # j catches i from behind
+        buf = np.where(ds >= 0, closing_ahead, closing_behind) * c.cut_in_time_s + c.min_gap_m
+        beside = np.abs(ds) < half_l + buf
+        dd = road.d[j] - d[i]
+        need = half_w + c.lateral_clearance_m
+        hi_side = np.full(n, np.inf)
+        lo_side = np.full(n, -np.inf)
+        left = beside & (dd >= 0)
+        right = beside & (dd < 0)
+        np.minimum.at(hi_side, i[left], road.d[j[left]] - need[left])
+        np.maximum.at(lo_side, i[right], road.d[j[right]] + need[right])
+        d_side = np.clip(d_next, np.minimum(lo_side, d), np.maximum(hi_side, d))
+        moved = np.abs(d_side - d_next) > 1e-9
+        self.counts.side += int(np.count_nonzero(moved))
+        d_next = d_side
+        v_lat_next = (d_next - d) / dt
+
+        # 3. safe speed ----------------------------------------------------------------
+        d_lo = np.minimum(d, d_next)
+        d_hi = np.maximum(d, d_next)
+        lat_gap = np.maximum(road.d[j] - d_hi[i], d_lo[i] - road.d[j]) - half_w
+        ahead = (ds > 0) & (lat_gap < c.lateral_clearance_m)
+        gap = ds - half_l - c.min_gap_m
+        b, bl, tau = c.own_decel_mps2, c.leader_decel_mps2, c.tau
+        v_l = road.v[j]
+        v_safe_pair = -b * tau + np.sqrt(
+            np.maximum((b * tau) ** 2 + v_l**2 * b / bl + 2.0 * b * gap, 0.0)
+        )
+        v_safe_pair = np.where(gap < 0, 0.0, v_safe_pair)
+        v_safe = np.full(n, np.inf)
+        np.minimum.at(v_safe, i[ahead], v_safe_pair[ahead])
+        u_max = (v_safe - v) / dt
+        u_long = np.minimum(u[:, 0], u_max)
+        u_long = np.maximum(u_long, -c.own_decel_mps2)
+        # Never command a negative next speed.
+        u_long = np.maximum(u_long, -v / dt)
+        self.counts.speed += int(np.count_nonzero(u_long < u[:, 0] - 1e-9))
+        u[:, 0] = u_long
+        u[:, 1] = (v_lat_next - v_lat) / dt
+        return u, v_lat_next

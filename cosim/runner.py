@@ -1,0 +1,344 @@
+"""Run one scenario in SUMO: build the inputs, drive the loop, write the outputs.
+
+``run_scenario(scenario)`` returns a :class:`RunResult` of pandas DataFrames;
+with ``out_dir`` it also writes them as CSV together with the resolved
+config, the seed and the versions (``meta.json``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import platform
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from controllers.constraints import AccelerationBox, ConstrainedController, JerkLimit
+from controllers.flocking import OlfatiSaberController
+from controllers.observation import Observation
+from controllers.safety import RoadState, SafetyConfig, SafetyLayer
+
+from . import __version__
+from .config import Scenario
+from .demand import write_detectors, write_routes
+from .errors import CosimError, SumoStartError
+from .flock_metrics import flock_metrics
+from .network_build import build_network, sumo_version
+from .sumo_world import SumoWorld
+from .toml_write import dumps_toml
+from .traffic_metrics import StepState, TrafficRecorder
+
+FLOCK_SAMPLE_S = 1.0  # s between flock-metric samples
+
+
+@dataclass
+class RunResult:
+    """Outputs of one run: summary (1 row), intervals, flock samples, collisions, trajectories."""
+
+    summary: pd.DataFrame
+    intervals: pd.DataFrame
+    flock: pd.DataFrame
+    collisions: pd.DataFrame
+    trajectories: pd.DataFrame | None
+    meta: dict = field(default_factory=dict)
+    out_dir: Path | None = None
+
+    def write(self, out_dir: str | Path) -> Path:
+        """Write every table as CSV plus meta.json and config.toml into ``out_dir``."""
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        self.summary.to_csv(out / "summary.csv", index=False)
+        self.intervals.to_csv(out / "intervals.csv", index=False)
+        self.flock.to_csv(out / "flock.csv", index=False)
+        self.collisions.to_csv(out / "collisions.csv", index=False)
+        if self.trajectories is not None:
+            self.trajectories.to_csv(out / "trajectories.csv", index=False)
+        (out / "meta.json").write_text(json.dumps(self.meta, indent=2, default=str))
+        (out / "config.toml").write_text(dumps_toml(self.meta["config"]))
+        self.out_dir = out
+        return out
+
+
+def versions() -> dict[str, str]:
+    """Versions of this package, SUMO, numpy, pandas and Python (recorded in every output)."""
+    return {
+        "cosim": __version__,
+        "sumo": sumo_version(),
+        "numpy": np.__version__,
+        "pandas": pd.__version__,
+        "python": platform.python_version(),
+    }
+
+
+def _measurement_layout(sc: Scenario, length: float, periodic: bool):
+    o = sc.outputs
+    if periodic:
+        zone = (0.0, length)
+    else:
+        end = o.zone_end_m or max(length - 100.0, o.zone_start_m + 1.0)
+        zone = (o.zone_start_m, min(end, length))
+    xs = o.cross_sections_m or (zone[0], 0.5 * (zone[0] + zone[1]), zone[1] - 1.0)
+    return zone, tuple(xs)
+
+
+def run_scenario(
+    sc: Scenario,
+    out_dir: str | Path | None = None,
+    gui: bool = False,
+    progress: bool = False,
+) -> RunResult:
+    """Run ``sc`` in SUMO and return (and, with ``out_dir``, write) its results."""
+    t_wall = time.perf_counter()
+    run = sc.scenario
+    net = build_network(sc.network)
+    work = Path(out_dir) if out_dir is not None else Path(tempfile.mkdtemp(prefix="cosim_"))
+    work.mkdir(parents=True, exist_ok=True)
+    demand = dataclasses.replace(sc.demand, duration_s=run.duration_s)
+    routes = write_routes(net, demand, run.seed, work / "routes.rou.xml")
+    zone, xs = _measurement_layout(sc, net.length_m, net.periodic)
+
+    args = [
+        "-r", str(routes.path),
+        "--step-length", str(run.step_length_s),
+        "--lateral-resolution", str(run.lateral_resolution_m),
+        "--collision.action", "warn",
+        "--collision.mingap-factor", "0",
+        "--seed", str(run.seed),
+        "--begin", "0",
+        "--end", str(run.duration_s),
+        "--no-step-log", "true",
+        "--no-warnings", "true",
+        "--duration-log.disable", "true",
+    ]
+    detectors = None
+    if sc.outputs.sumo_detectors:
+        detectors = write_detectors(
+            net, [x for x in xs if x <= net.length_m], work / "detectors.add.xml",
+            run.interval_s, work / "sumo",
+        )
+        args += ["-a", str(detectors.path)]
+
+    world = SumoWorld(net, args, gui=gui)
+    world.start()
+    try:
+        result = _loop(sc, net, world, routes, zone, xs, progress)
+    except CosimError:
+        raise
+    except Exception as exc:  # a SUMO crash mid-run
+        raise SumoStartError(f"SUMO failed during the run: {exc}") from None
+    finally:
+        world.close()
+
+    meta = {
+        "config": sc.to_dict(),
+        "seed": run.seed,
+        "versions": versions(),
+        "network": {"file": str(net.net_file), "kind": net.kind, "length_m": net.length_m},
+        "routes": {"file": str(routes.path), "n_cav": routes.n_cav, "n_hdv": routes.n_hdv,
+                   "arrival_process": routes.arrival_process},
+        "measurement": {"zone_m": zone, "cross_sections_m": xs},
+        "wall_time_s": time.perf_counter() - t_wall,
+    }
+    if detectors is not None:
+        meta["sumo_detectors"] = {
+            "loop_ids": detectors.loop_ids, "loop_s_m": detectors.loop_s_m,
+            "loop_files": [str(p) for p in detectors.loop_files],
+            "edgedata_file": str(detectors.edgedata_file),
+        }
+    result.meta = meta
+    result.summary.insert(0, "seed", run.seed)
+    result.summary.insert(0, "scenario", run.name)
+    result.summary["wall_time_s"] = meta["wall_time_s"]
+    if out_dir is not None:
+        result.write(out_dir)
+    return result
+
+
+def _build_controller(sc: Scenario):
+    lim = sc.limits
+    layers = [AccelerationBox(lim.long_min_mps2, lim.long_max_mps2, lim.lat_max_mps2)]
+    if lim.jerk_max_mps3 > 0:
+        layers.append(JerkLimit(lim.jerk_max_mps3))
+    return ConstrainedController(OlfatiSaberController(sc.controller.flocking_params()), layers)
+
+
+def _loop(sc, net, world: SumoWorld, routes, zone, xs, progress: bool) -> RunResult:
+    run = sc.scenario
+    dt = run.step_length_s
+    n_steps = int(round(run.duration_s / dt))
+    period = net.length_m if net.periodic else None
+    controlling = sc.controller.kind == "flocking"
+    controller = _build_controller(sc)
+    safety = SafetyLayer(
+        SafetyConfig(
+            dt=dt,
+            reaction_steps=sc.safety.reaction_steps,
+            min_gap_m=sc.safety.min_gap_m,
+            lateral_clearance_m=sc.safety.lateral_clearance_m,
+            edge_margin_m=sc.safety.edge_margin_m,
+            own_decel_mps2=sc.limits.emergency_decel_mps2,
+            leader_decel_mps2=sc.safety.assumed_leader_decel_mps2,
+            lat_accel_mps2=sc.limits.lat_max_mps2,
+            lat_speed_max_mps=sc.limits.lat_speed_max_mps,
+        )
+    )
+    recorder = TrafficRecorder(dt, zone, xs, run.interval_s, run.warmup_s, period)
+    v_des = dict(routes.desired_speed_mps)
+    v_cap = net.speed_limit_mps
+    flock_rows: list[dict] = []
+    traj: list[pd.DataFrame] = []
+    sample_every = max(1, int(round(FLOCK_SAMPLE_S / dt)))
+    departed: set = set()
+    arrived: set = set()
+    obstacle_id = None
+    prm = sc.controller.flocking_params()
+
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=n_steps, unit="step", desc=run.name, leave=False)
+    for k in range(n_steps):
+        ts = world.ts
+        if obstacle_id is None and sc.obstacle.present and k * dt >= sc.obstacle.appear_s:
+            ob = sc.obstacle
+            obstacle_id = world.add_obstacle(ob.s_m, ob.d_m, ob.length_m, ob.width_m)
+        world.step()
+        departed.update(ts.simulation.getDepartedIDList())
+        arrived.update(ts.simulation.getArrivedIDList())
+        world.hold_obstacle()
+        t = world.time
+        va = world.read()
+        main = va.on_main
+        idx_main = np.flatnonzero(main)
+        edges_r, edges_l = net.edges_at(va.s[idx_main]) if len(idx_main) else (np.empty(0),) * 2
+
+        cav_rows = np.flatnonzero(main & va.is_cav)
+        if controlling and len(cav_rows):
+            for r in cav_rows:
+                if va.ids[r] not in world.controlled:
+                    world.take_over(va.ids[r])
+            _control_step(sc, net, world, controller, safety, va, cav_rows, idx_main,
+                          edges_r, edges_l, v_des, v_cap, dt, period)
+
+        st = StepState(
+            t=t,
+            ids=[va.ids[r] for r in idx_main],
+            s=va.s[idx_main],
+            s_front=va.s_front[idx_main],
+            d=va.d[idx_main],
+            v=va.v[idx_main],
+            v_lat=va.v_lat[idx_main],
+            length=va.length[idx_main],
+            width=va.width[idx_main],
+            is_cav=va.is_cav[idx_main],
+            edge_right=edges_r,
+            edge_left=edges_l,
+        )
+        if obstacle_id is not None and obstacle_id in st.ids:
+            keep = np.array([i != obstacle_id for i in st.ids])
+            st = _subset(st, keep)
+        recorder.record(st, world.collisions())
+        if k % sample_every == 0 and t > run.warmup_s:
+            cav = st.is_cav
+            if cav.sum() >= 2:
+                q = np.column_stack([st.s[cav], st.d[cav]])
+                p = np.column_stack([st.v[cav], st.v_lat[cav]])
+                row = {"t_s": t, "n_cav": int(cav.sum())}
+                row.update(flock_metrics(q, p, prm.d_long or prm.d, prm.r * (
+                    (prm.d_long or prm.d) / prm.d), period=period))
+                flock_rows.append(row)
+        if sc.outputs.trajectories and k % sc.outputs.trajectory_every == 0:
+            traj.append(pd.DataFrame({
+                "t_s": t, "id": st.ids, "s_m": st.s, "d_m": st.d, "v_mps": st.v,
+                "v_lat_mps": st.v_lat, "length_m": st.length, "width_m": st.width,
+                "is_cav": st.is_cav,
+            }))
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    recorder.finish(world.time)
+
+    summary = recorder.summary()
+    running = len(world.types) - (1 if obstacle_id in world.types else 0)
+    n_departed = len(departed - {obstacle_id})
+    summary.update(
+        {
+            "vehicles_inserted": n_departed,
+            "vehicles_arrived": len(arrived - {obstacle_id}),
+            "vehicles_running_at_end": running,
+            "vehicles_not_inserted": routes.n_cav + routes.n_hdv - n_departed,
+            "teleports": world.teleports(),
+        }
+    )
+    summary.update(safety.counts.as_dict())
+    for name, rate in controller.clip_stats().items():
+        summary[f"clip_rate_{name}"] = rate
+    flock = pd.DataFrame(flock_rows)
+    if len(flock):
+        for col in ("min_agent_distance_m", "velocity_alignment", "largest_component_share"):
+            summary[f"flock_{col}"] = (
+                float(flock[col].min()) if col.startswith("min") else float(flock[col].mean())
+            )
+    return RunResult(
+        summary=pd.DataFrame([summary]),
+        intervals=pd.DataFrame(recorder.rows),
+        flock=flock,
+        collisions=pd.DataFrame(recorder.collision_log,
+                                columns=["t_s", "source", "a", "b", "kind"]),
+        trajectories=pd.concat(traj, ignore_index=True) if traj else None,
+    )
+
+
+def _subset(st: StepState, keep: np.ndarray) -> StepState:
+    vals = {}
+    for f in dataclasses.fields(st):
+        v = getattr(st, f.name)
+        if f.name == "t":
+            vals[f.name] = v
+        elif isinstance(v, list):
+            vals[f.name] = [x for x, k in zip(v, keep, strict=True) if k]
+        else:
+            vals[f.name] = v[keep]
+    return StepState(**vals)
+
+
+def _control_step(sc, net, world, controller, safety, va, cav_rows, idx_main, edges_r,
+                  edges_l, v_des, v_cap, dt, period) -> None:
+    """One control step for the CAVs on the main road."""
+    pos_in_main = np.searchsorted(idx_main, cav_rows)
+    others = np.setdiff1d(idx_main, cav_rows, assume_unique=True)
+    ids = [va.ids[r] for r in cav_rows]
+    q = np.column_stack([va.s[cav_rows], va.d[cav_rows]])
+    p = np.column_stack([va.v[cav_rows], va.v_lat[cav_rows]])
+    edges = np.column_stack([edges_r[pos_in_main], edges_l[pos_in_main]])
+    leader_p = np.zeros_like(p)
+    leader_p[:, 0] = [v_des.get(i, v_cap) for i in ids]
+    obs = Observation(
+        q=q, p=p, t=world.time, dt=dt, ids=np.array(ids, dtype=object),
+        length=va.length[cav_rows], width=va.width[cav_rows],
+        others_q=np.column_stack([va.s[others], va.d[others]]),
+        others_p=np.column_stack([va.v[others], va.v_lat[others]]),
+        others_length=va.length[others], others_width=va.width[others],
+        road_edges=edges, leader_p=leader_p, period_s=period,
+    )
+    u = controller.compute(obs)
+    if sc.controller.lateral_damping > 0:
+        u[:, 1] -= sc.controller.lateral_damping * p[:, 1]
+        u[:, 1] = np.clip(u[:, 1], -sc.limits.lat_max_mps2, sc.limits.lat_max_mps2)
+    if sc.safety.enabled:
+        road = RoadState(va.s[idx_main], va.d[idx_main], va.v[idx_main],
+                         va.length[idx_main], va.width[idx_main])
+        u, v_lat_next = safety.apply(u, pos_in_main, p[:, 1], road, edges, period)
+    else:
+        v_lat_next = np.clip(p[:, 1] + u[:, 1] * dt, -sc.limits.lat_speed_max_mps,
+                             sc.limits.lat_speed_max_mps)
+    v_next = np.clip(p[:, 0] + u[:, 0] * dt, 0.0, v_cap)
+    d_next = q[:, 1] + v_lat_next * dt
+    world.apply(ids, v_next, d_next, [va.lane[r] for r in cav_rows], v_lat_next)

@@ -1,0 +1,233 @@
+"""The SUMO world: libsumo loop, road frame, CAV take-over, applying commands.
+
+This adapter owns every SUMO side effect; controllers never see SUMO. Each
+step: ``simulationStep`` -> read all vehicles in bulk (subscriptions) ->
+road frame ``(s, d)`` -> observation -> controller -> constraint layers ->
+safety layer -> ``setSpeed`` (longitudinal) and ``setLateralLanePosition``
+(lateral, integrated by us) for the CAVs.
+
+With speed mode 0, ``setSpeed(v + a dt)`` gives ``x += v_new dt`` (SUMO's
+default Euler update); the lateral double integrator is integrated here as
+``v_lat += u_lat dt; d += v_lat dt`` (the same semi-implicit Euler).
+"""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import SumoStartError
+from .network_build import RoadNetwork
+
+_VARS = None
+
+
+def _vars():
+    global _VARS
+    if _VARS is None:
+        import libsumo as ls
+
+        _VARS = (
+            ls.VAR_LANE_ID,
+            ls.VAR_LANEPOSITION,
+            ls.VAR_LANEPOSITION_LAT,
+            ls.VAR_SPEED,
+            ls.VAR_SPEED_LAT,
+            ls.VAR_LENGTH,
+            ls.VAR_WIDTH,
+            ls.VAR_TYPE,
+        )
+    return _VARS
+
+
+def sumo_binary(gui: bool = False) -> str:
+    """Path of the ``sumo`` (or ``sumo-gui``) binary shipped by the eclipse-sumo package."""
+    name = "sumo-gui" if gui else "sumo"
+    try:
+        import sumo
+
+        cand = Path(sumo.SUMO_HOME) / "bin" / name
+        if cand.exists():
+            return str(cand)
+    except ImportError:
+        pass
+    found = shutil.which(name)
+    if found:
+        return found
+    raise SumoStartError(f"{name} binary not found (install the eclipse-sumo package)")
+
+
+@dataclass
+class VehicleArrays:
+    """Bulk state of the vehicles on the road this step (M of them)."""
+
+    ids: list
+    lane: list
+    s_front: np.ndarray
+    s: np.ndarray
+    d: np.ndarray
+    v: np.ndarray
+    v_lat: np.ndarray
+    length: np.ndarray
+    width: np.ndarray
+    is_cav: np.ndarray
+    on_main: np.ndarray
+
+
+class SumoWorld:
+    """A running SUMO simulation seen in the road frame of ``net``.
+
+    Args:
+        net: the road network (road frame).
+        sumo_args: extra SUMO command-line arguments (routes, options).
+        cav_prefix: vType id prefix that marks CAVs.
+        gui: run ``sumo-gui`` through TraCI instead of libsumo.
+    """
+
+    def __init__(self, net: RoadNetwork, sumo_args: list[str], cav_prefix: str = "cav",
+                 gui: bool = False) -> None:
+        self.net = net
+        self.cav_prefix = cav_prefix
+        self.gui = gui
+        self.cmd = [sumo_binary(gui), "-n", str(net.net_file), *sumo_args]
+        self.ts = None
+        self.types: dict[str, str] = {}
+        self.controlled: set[str] = set()
+        self.v_lat_state: dict[str, float] = {}
+        self.period = net.length_m if net.periodic else None
+        self.main_lanes = {k for k in net.lane_offsets if self._is_main(k)}
+
+    def _is_main(self, lane: str) -> bool:
+        edge = lane.rsplit("_", 1)[0] if not lane.startswith(":") else lane
+        return edge in self.net.main_route or lane.startswith(":") or lane in self.net.main_route
+
+    # ------------------------------------------------------------------------------
+    def start(self) -> None:
+        """Start SUMO; raise SumoStartError with SUMO's message if it fails."""
+        try:
+            if self.gui:
+                import traci
+
+                traci.start(self.cmd)
+                self.ts = traci
+            else:
+                import libsumo
+
+                libsumo.start(self.cmd)
+                self.ts = libsumo
+        except Exception as exc:  # libsumo raises its own exception types
+            msg = str(exc).strip().splitlines()
+            raise SumoStartError(
+                f"SUMO failed to start: {msg[-1] if msg else type(exc).__name__}"
+            ) from None
+
+    def close(self) -> None:
+        if self.ts is not None:
+            try:
+                self.ts.close()
+            except Exception:
+                pass
+            self.ts = None
+
+    @property
+    def time(self) -> float:
+        return float(self.ts.simulation.getTime())
+
+    def step(self) -> None:
+        """Advance SUMO one step and register departures and arrivals."""
+        ts = self.ts
+        ts.simulationStep()
+        for vid in ts.simulation.getDepartedIDList():
+            ts.vehicle.subscribe(vid, _vars())
+            self.types[vid] = ts.vehicle.getTypeID(vid)
+        for vid in ts.simulation.getArrivedIDList():
+            self.types.pop(vid, None)
+            self.controlled.discard(vid)
+            self.v_lat_state.pop(vid, None)
+
+    def read(self) -> VehicleArrays:
+        """All vehicles on the network, in the road frame (centre positions)."""
+        ls = self.ts
+        res = ls.vehicle.getAllSubscriptionResults()
+        v_lane, v_pos, v_lat, v_speed, v_slat, v_len, v_wid, _ = _vars()
+        ids = list(res.keys())
+        n = len(ids)
+        lane = [None] * n
+        arr = np.empty((n, 6))
+        for k, vid in enumerate(ids):
+            r = res[vid]
+            lane[k] = r[v_lane]
+            arr[k, 0] = r[v_pos]
+            arr[k, 1] = r[v_lat]
+            arr[k, 2] = r[v_speed]
+            arr[k, 3] = r[v_slat]
+            arr[k, 4] = r[v_len]
+            arr[k, 5] = r[v_wid]
+        s_front = self.net.s_of_many(lane, arr[:, 0]) if n else np.empty(0)
+        s = s_front - 0.5 * arr[:, 4]
+        if self.period is not None:
+            s = np.mod(s, self.period)
+        d = arr[:, 1] + np.array([self.net.lane_d.get(x, 0.0) for x in lane]) if n else arr[:, 1]
+        is_cav = np.array([self.types.get(v, "").startswith(self.cav_prefix) for v in ids], bool)
+        v_lat_now = arr[:, 3].copy()
+        for k, vid in enumerate(ids):
+            if vid in self.v_lat_state:
+                v_lat_now[k] = self.v_lat_state[vid]
+        on_main = np.array([x in self.main_lanes for x in lane], bool) & ~np.isnan(s)
+        return VehicleArrays(ids, lane, s_front, s, d, arr[:, 2], v_lat_now, arr[:, 4],
+                             arr[:, 5], is_cav, on_main)
+
+    def take_over(self, vid: str) -> None:
+        """Hand a CAV to our controller: no SUMO speed checks, no SUMO lane changes."""
+        self.ts.vehicle.setSpeedMode(vid, 0)
+        self.ts.vehicle.setLaneChangeMode(vid, 0)
+        self.controlled.add(vid)
+        self.v_lat_state.setdefault(vid, 0.0)
+
+    def apply(self, ids: list, v_next: np.ndarray, d_next: np.ndarray, lanes: list,
+              v_lat_next: np.ndarray) -> None:
+        """Command next speeds (m/s) and lateral positions (road frame, m) of CAVs."""
+        veh = self.ts.vehicle
+        lane_d = self.net.lane_d
+        for vid, v, d, lane, vl in zip(ids, v_next, d_next, lanes, v_lat_next, strict=True):
+            veh.setSpeed(vid, float(v))
+            veh.setLateralLanePosition(vid, float(d - lane_d.get(lane, 0.0)))
+            self.v_lat_state[vid] = float(vl)
+
+    def collisions(self) -> list[tuple[str, str]]:
+        """(collider, victim) pairs SUMO detected in the last step."""
+        return [(c.collider, c.victim) for c in self.ts.simulation.getCollisions()]
+
+    def teleports(self) -> int:
+        return int(self.ts.simulation.getStartingTeleportNumber())
+
+    def add_obstacle(self, s_m: float, d_m: float, length_m: float, width_m: float) -> str:
+        """Place a stopped vehicle (id "obstacle") with its centre at (s, d); returns its id."""
+        ts = self.ts
+        edge, pos = self.net.locate(s_m + 0.5 * length_m)
+        type_id = "obstacle_t"
+        ts.vehicletype.copy("DEFAULT_VEHTYPE", type_id)
+        ts.vehicletype.setLength(type_id, length_m)
+        ts.vehicletype.setWidth(type_id, width_m)
+        ts.vehicletype.setMinGap(type_id, 0.0)
+        ts.route.add("obstacle_route", [edge])
+        ts.vehicle.add("obstacle", "obstacle_route", typeID=type_id, departPos=str(pos),
+                       departSpeed="0", departLane="0")
+        ts.vehicle.setSpeedMode("obstacle", 0)
+        ts.vehicle.setLaneChangeMode("obstacle", 0)
+        ts.vehicle.setSpeed("obstacle", 0.0)
+        self._obstacle = (edge, pos, d_m)
+        return "obstacle"
+
+    def hold_obstacle(self) -> None:
+        """Keep the obstacle vehicle in place (call every step after it departed)."""
+        if getattr(self, "_obstacle", None) is None:
+            return
+        if "obstacle" in self.types:
+            edge, pos, d_m = self._obstacle
+            lane = f"{edge}_0"
+            self.ts.vehicle.setSpeed("obstacle", 0.0)
+            self.ts.vehicle.setLateralLanePosition("obstacle", d_m - self.net.lane_d.get(lane, 0))

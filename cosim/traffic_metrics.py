@@ -1,0 +1,321 @@
+"""Traffic metrics of a road run, accumulated online from per-step vehicle arrays.
+
+Definitions (units in names):
+
+* **Edie's generalised flow, density and speed** (L. C. Edie, "Discussion of
+  traffic stream measurements and definitions", 1963) over a space-time
+  region of length ``X`` (m) and duration ``T`` (s): with total distance
+  travelled ``TTD`` (m) and total time spent ``TTS`` (s) inside it,
+  ``q = TTD / (X T)`` (veh/s -> veh/h), ``k = TTS / (X T)`` (veh/m -> veh/km),
+  ``v = TTD / TTS`` (space-mean speed, m/s).
+* **Cross-section flow**: vehicles whose front passes ``x`` per hour, as an
+  induction loop counts them (SUMO E1 counts a vehicle when its front enters).
+* **Gaps**: bumper-to-bumper longitudinal gap to the nearest vehicle ahead
+  that overlaps laterally; side clearance to the nearest vehicle beside that
+  overlaps longitudinally; time headway = gap / own speed.
+* **Boundary violations**: vehicle-steps with any part of the body outside
+  the road edges, distinct vehicles, worst excursion (m).
+* **Collisions**: SUMO's own list (``simulation.getCollisions``) and a
+  geometric rectangle-overlap check; a collision event is a pair that starts
+  to overlap; split into CAV-involved and HDV-only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from controllers.neighbours import tree_points
+
+
+@dataclass
+class StepState:
+    """All vehicles on the main road at one step (M of them), SI units."""
+
+    t: float
+    ids: list
+    s: np.ndarray  # centre position along the main route, m
+    s_front: np.ndarray  # front bumper, m
+    d: np.ndarray  # lateral centre offset, m
+    v: np.ndarray  # longitudinal speed, m/s
+    v_lat: np.ndarray  # lateral speed, m/s
+    length: np.ndarray
+    width: np.ndarray
+    is_cav: np.ndarray  # bool
+    edge_right: np.ndarray  # lateral road edges at each vehicle, m
+    edge_left: np.ndarray
+
+
+def overlapping_pairs(st: StepState, period: float | None) -> np.ndarray:
+    """Pairs (i < j) of vehicles whose rectangles overlap (strictly), (P, 2)."""
+    if len(st.s) < 2:
+        return np.empty((0, 2), dtype=np.int64)
+    reach = float(np.hypot(st.length.max(), st.width.max()))
+    pts, box = tree_points(np.column_stack([st.s, st.d]), reach, period)
+    pairs = cKDTree(pts, boxsize=box).query_pairs(reach, output_type="ndarray")
+    if len(pairs) == 0:
+        return pairs
+    i, j = pairs[:, 0], pairs[:, 1]
+    ds = st.s[j] - st.s[i]
+    if period is not None:
+        ds = (ds + 0.5 * period) % period - 0.5 * period
+    ov = (np.abs(ds) < 0.5 * (st.length[i] + st.length[j])) & (
+        np.abs(st.d[j] - st.d[i]) < 0.5 * (st.width[i] + st.width[j])
+    )
+    return pairs[ov]
+
+
+def gaps(st: StepState, period: float | None, lateral_overlap_margin_m: float = 0.0):
+    """Per-vehicle longitudinal gap to the leader, side clearance, (M,) m each (inf if none)."""
+    n = len(st.s)
+    g_long = np.full(n, np.inf)
+    g_side = np.full(n, np.inf)
+    if n < 2:
+        return g_long, g_side
+    reach = 150.0
+    pts, box = tree_points(np.column_stack([st.s, st.d]), reach, period)
+    pairs = cKDTree(pts, boxsize=box).query_pairs(reach, output_type="ndarray")
+    if len(pairs) == 0:
+        return g_long, g_side
+    i = np.concatenate([pairs[:, 0], pairs[:, 1]])
+    j = np.concatenate([pairs[:, 1], pairs[:, 0]])
+    ds = st.s[j] - st.s[i]
+    if period is not None:
+        ds = (ds + 0.5 * period) % period - 0.5 * period
+    half_l = 0.5 * (st.length[i] + st.length[j])
+    half_w = 0.5 * (st.width[i] + st.width[j])
+    dd = np.abs(st.d[j] - st.d[i])
+    lat_overlap = dd < half_w + lateral_overlap_margin_m
+    ahead = (ds > 0) & lat_overlap
+    np.minimum.at(g_long, i[ahead], ds[ahead] - half_l[ahead])
+    beside = (np.abs(ds) < half_l) & ~lat_overlap
+    np.minimum.at(g_side, i[beside], dd[beside] - half_w[beside])
+    return g_long, g_side
+
+
+@dataclass
+class IntervalAccumulator:
+    """Edie sums and counters for one measurement interval."""
+
+    t0: float
+    tts_s: float = 0.0
+    ttd_m: float = 0.0
+    crossings: np.ndarray | None = None
+    boundary_vehicle_steps: int = 0
+    collisions_sumo: int = 0
+    collisions_geom: int = 0
+    min_gap_m: float = np.inf
+    min_side_clearance_m: float = np.inf
+    headways_s: list = field(default_factory=list)
+
+
+class TrafficRecorder:
+    """Accumulate traffic metrics step by step; produce the interval table and summary.
+
+    Args:
+        dt: step, s.
+        zone: (start, end) of the Edie measurement zone along the main route, m.
+        cross_sections: positions (m) of the flow cross-sections.
+        interval_s: interval length, s; warmup_s: start of the measurement, s.
+        period: ring length, m, or None.
+    """
+
+    def __init__(
+        self,
+        dt: float,
+        zone: tuple[float, float],
+        cross_sections: tuple[float, ...],
+        interval_s: float,
+        warmup_s: float,
+        period: float | None = None,
+    ) -> None:
+        self.dt = dt
+        self.zone = zone
+        self.xs = np.asarray(cross_sections, dtype=float)
+        self.interval_s = interval_s
+        self.warmup_s = warmup_s
+        self.period = period
+        self.rows: list[dict] = []
+        self._acc: IntervalAccumulator | None = None
+        self._prev_front: dict = {}
+        self._prev_overlaps: set = set()
+        self._boundary_ids: set = set()
+        self.worst_excursion_m = 0.0
+        self.boundary_vehicle_steps = 0
+        self.collisions_sumo = {"cav": 0, "hdv_only": 0}
+        self.collisions_geom = {"cav": 0, "hdv_only": 0}
+        self.collision_log: list[dict] = []
+        self.min_gap_m = np.inf
+        self.min_side_clearance_m = np.inf
+        self.min_cav_gap_m = np.inf
+        self.headway_samples: list[np.ndarray] = []
+        self.vehicle_steps = 0
+
+    # --------------------------------------------------------------------------
+    def record(self, st: StepState, sumo_collisions: list[tuple[str, str]]) -> None:
+        """Add one step (state after the step at time ``st.t``)."""
+        t = st.t
+        measuring = t > self.warmup_s + 1e-9
+        if measuring and (self._acc is None or t > self._acc.t0 + self.interval_s + 1e-9):
+            self._close_interval()
+            start = self.warmup_s if self._acc is None else self._acc.t0 + self.interval_s
+            self._acc = IntervalAccumulator(t0=start, crossings=np.zeros(len(self.xs), int))
+        acc = self._acc if measuring else None
+        self.vehicle_steps += len(st.s)
+
+        # Edie sums in the zone (each vehicle spends dt in this step).
+        z0, z1 = self.zone
+        in_zone = (st.s >= z0) & (st.s < z1)
+        if acc is not None:
+            acc.tts_s += self.dt * int(np.count_nonzero(in_zone))
+            acc.ttd_m += self.dt * float(np.sum(st.v[in_zone]))
+
+        # Cross-section counts (front bumper passes x between steps).
+        front = dict(zip(st.ids, st.s_front, strict=True))
+        if acc is not None and len(self.xs):
+            prev = np.array([self._prev_front.get(k, np.nan) for k in st.ids])
+            ok = ~np.isnan(prev)
+            cur = st.s_front[ok]
+            prv = prev[ok]
+            if self.period is not None:
+                wrapped = cur < prv - 0.5 * self.period
+                cur = np.where(wrapped, cur + self.period, cur)
+                for k, x in enumerate(self.xs):
+                    acc.crossings[k] += int(
+                        np.count_nonzero((prv < x) & (cur >= x))
+                        + np.count_nonzero((prv < x + self.period) & (cur >= x + self.period))
+                    )
+            else:
+                for k, x in enumerate(self.xs):
+                    acc.crossings[k] += int(np.count_nonzero((prv < x) & (cur >= x)))
+        self._prev_front = front
+
+        # Boundary violations (body outside the edges).
+        excursion = np.maximum(
+            st.edge_right - (st.d - 0.5 * st.width), (st.d + 0.5 * st.width) - st.edge_left
+        )
+        out = excursion > 1e-6
+        if out.any():
+            self.boundary_vehicle_steps += int(np.count_nonzero(out))
+            self._boundary_ids.update(np.asarray(st.ids, dtype=object)[out].tolist())
+            self.worst_excursion_m = max(self.worst_excursion_m, float(excursion.max()))
+            if acc is not None:
+                acc.boundary_vehicle_steps += int(np.count_nonzero(out))
+
+        # Collisions: geometric new overlaps and SUMO's list.
+        pairs = overlapping_pairs(st, self.period)
+        now = set()
+        for a, b in pairs:
+            key = tuple(sorted((st.ids[a], st.ids[b])))
+            now.add(key)
+            if key not in self._prev_overlaps:
+                kind = "cav" if (st.is_cav[a] or st.is_cav[b]) else "hdv_only"
+                self.collisions_geom[kind] += 1
+                self.collision_log.append(
+                    {"t_s": t, "source": "geometric", "a": key[0], "b": key[1], "kind": kind}
+                )
+                if acc is not None:
+                    acc.collisions_geom += 1
+        self._prev_overlaps = now
+        cav_set = {k for k, c in zip(st.ids, st.is_cav, strict=True) if c}
+        for a, b in sumo_collisions:
+            kind = "cav" if (a in cav_set or b in cav_set) else "hdv_only"
+            self.collisions_sumo[kind] += 1
+            self.collision_log.append({"t_s": t, "source": "sumo", "a": a, "b": b, "kind": kind})
+            if acc is not None:
+                acc.collisions_sumo += 1
+
+        # Gaps and headways.
+        if measuring:
+            g_long, g_side = gaps(st, self.period)
+            finite = np.isfinite(g_long)
+            if finite.any():
+                self.min_gap_m = min(self.min_gap_m, float(g_long[finite].min()))
+                cav_f = finite & st.is_cav
+                if cav_f.any():
+                    self.min_cav_gap_m = min(self.min_cav_gap_m, float(g_long[cav_f].min()))
+                moving = finite & (st.v > 1.0)
+                hw = g_long[moving] / st.v[moving]
+                if acc is not None:
+                    acc.min_gap_m = min(acc.min_gap_m, float(g_long[finite].min()))
+                    acc.headways_s.append(hw)
+            fs = np.isfinite(g_side)
+            if fs.any():
+                self.min_side_clearance_m = min(self.min_side_clearance_m, float(g_side[fs].min()))
+                if acc is not None:
+                    acc.min_side_clearance_m = min(
+                        acc.min_side_clearance_m, float(g_side[fs].min())
+                    )
+
+    # --------------------------------------------------------------------------
+    def _close_interval(self) -> None:
+        acc = self._acc
+        if acc is None:
+            return
+        z0, z1 = self.zone
+        x_len = z1 - z0
+        hw = np.concatenate(acc.headways_s) if acc.headways_s else np.empty(0)
+        if len(hw):
+            self.headway_samples.append(hw)
+        row = {
+            "t_start_s": acc.t0,
+            "t_end_s": acc.t0 + self.interval_s,
+            "edie_flow_vph": acc.ttd_m / (x_len * self.interval_s) * 3600.0,
+            "edie_density_vpkm": acc.tts_s / (x_len * self.interval_s) * 1000.0,
+            "space_mean_speed_mps": acc.ttd_m / acc.tts_s if acc.tts_s > 0 else np.nan,
+            "boundary_vehicle_steps": acc.boundary_vehicle_steps,
+            "collisions_sumo": acc.collisions_sumo,
+            "collisions_geometric": acc.collisions_geom,
+            "min_gap_m": acc.min_gap_m,
+            "min_side_clearance_m": acc.min_side_clearance_m,
+            "median_time_headway_s": float(np.median(hw)) if len(hw) else np.nan,
+        }
+        for k, x in enumerate(self.xs):
+            row[f"flow_x{x:g}_vph"] = acc.crossings[k] / self.interval_s * 3600.0
+        self.rows.append(row)
+
+    def finish(self, t_end: float) -> None:
+        """Close the last interval if it is complete (partial intervals are dropped)."""
+        if self._acc is not None and t_end >= self._acc.t0 + self.interval_s - 1e-6:
+            self._close_interval()
+        self._acc = None
+
+    def summary(self) -> dict:
+        """One-row summary over the measurement period (after warm-up)."""
+        rows = self.rows
+        hw = np.concatenate(self.headway_samples) if self.headway_samples else np.empty(0)
+
+        def mean(key):
+            vals = [r[key] for r in rows]
+            return float(np.nanmean(vals)) if vals else np.nan
+
+        out = {
+            "edie_flow_vph": mean("edie_flow_vph"),
+            "edie_density_vpkm": mean("edie_density_vpkm"),
+            "space_mean_speed_mps": (
+                float(np.nansum([r["edie_flow_vph"] for r in rows]))
+                / float(np.nansum([r["edie_density_vpkm"] for r in rows]))
+                / 3.6
+                if rows
+                else np.nan
+            ),
+            "boundary_vehicle_steps": self.boundary_vehicle_steps,
+            "boundary_vehicles": len(self._boundary_ids),
+            "worst_boundary_excursion_m": self.worst_excursion_m,
+            "collisions_sumo_cav": self.collisions_sumo["cav"],
+            "collisions_sumo_hdv_only": self.collisions_sumo["hdv_only"],
+            "collisions_geometric_cav": self.collisions_geom["cav"],
+            "collisions_geometric_hdv_only": self.collisions_geom["hdv_only"],
+            "min_gap_m": self.min_gap_m,
+            "min_cav_gap_m": self.min_cav_gap_m,
+            "min_side_clearance_m": self.min_side_clearance_m,
+            "median_time_headway_s": float(np.median(hw)) if len(hw) else np.nan,
+            "p05_time_headway_s": float(np.percentile(hw, 5)) if len(hw) else np.nan,
+            "vehicle_steps": self.vehicle_steps,
+            "n_intervals": len(rows),
+        }
+        for x in self.xs:
+            out[f"flow_x{x:g}_vph"] = mean(f"flow_x{x:g}_vph")
+        return out
