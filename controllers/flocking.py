@@ -25,6 +25,10 @@ Beyond the paper, for road vehicles:
 * road edges and walls are beta-agents at the projection (seed 000; seed 003
   eq. 5) measured from the vehicle's side; an agent already beyond a wall is
   still pushed back in.
+* the repulsion ``phi_beta(z) n_hat(z)`` of the paper vanishes at contact
+  (``n_hat`` is proportional to ``z``); for walls and vehicles the gap is
+  floored at half the desired spacing, so the repulsion is monotone and at
+  its largest for agents in contact or past a wall (a saturated barrier).
 """
 
 from __future__ import annotations
@@ -192,7 +196,7 @@ class OlfatiSaberController:
         if len(near) == 0:
             return np.zeros((n, m))
         a = normal[near]
-        gap = np.maximum(signed_gap[near], _MIN_GAP)
+        gap = np.maximum(signed_gap[near], 0.5 * p.d_wall)
         dq_hat = -a * gap[:, None]
         p_i = obs.p[near]
         p_hat = p_i - a * np.sum(a * p_i, axis=1, keepdims=True)
@@ -232,6 +236,10 @@ class OlfatiSaberController:
             out[np.arange(len(axis)), axis] = sign
             dq_hat[inside] = -out * _MIN_GAP
         gap = np.linalg.norm(dq_hat * s, axis=1)
+        floor = 0.5 * p.d_vehicle
+        short = gap < floor
+        if short.any():
+            dq_hat[short] *= (floor / np.maximum(gap[short], _MIN_GAP))[:, None]
         keep = gap < p.r_vehicle
         if not keep.any():
             return np.zeros((n, m))

@@ -134,6 +134,12 @@ class SafetyLayer:
         cap_left = np.sqrt(2.0 * c.lat_accel_mps2 * room_left)
         cap_right = np.sqrt(2.0 * c.lat_accel_mps2 * room_right)
         vl_edge = np.clip(vl, -cap_right, cap_left)
+        # Outside the allowed band already (e.g. entering a narrowing): steer back in
+        # at the lateral acceleration limit.
+        back_in = np.clip(v_lat - c.lat_accel_mps2 * dt, -c.lat_speed_max_mps, 0.0)
+        back_out = np.clip(v_lat + c.lat_accel_mps2 * dt, 0.0, c.lat_speed_max_mps)
+        vl_edge = np.where(d > hi, np.minimum(vl_edge, back_in), vl_edge)
+        vl_edge = np.where(d < lo, np.maximum(vl_edge, back_out), vl_edge)
         d_next = d + vl_edge * dt
         d_next = np.clip(d_next, np.minimum(lo, d), np.maximum(hi, d))
         vl_edge = (d_next - d) / dt

@@ -43,6 +43,7 @@ class RunSpec:
 
     Attributes:
         name: scenario name (used in output folder names).
+        description: one line shown by ``cosim list``.
         seed: random seed for demand and SUMO, int.
         duration_s: simulated time, s.
         warmup_s: time excluded from the measurements, s.
@@ -52,6 +53,7 @@ class RunSpec:
     """
 
     name: str = "default"
+    description: str = ""
     seed: int = 42
     duration_s: float = 240.0
     warmup_s: float = 60.0

@@ -144,6 +144,7 @@ class TrafficRecorder:
         self._boundary_ids: set = set()
         self.worst_excursion_m = 0.0
         self.boundary_vehicle_steps = 0
+        self.boundary_vehicle_steps_cav = 0
         self.collisions_sumo = {"cav": 0, "hdv_only": 0}
         self.collisions_geom = {"cav": 0, "hdv_only": 0}
         self.collision_log: list[dict] = []
@@ -199,6 +200,7 @@ class TrafficRecorder:
         out = excursion > 1e-6
         if out.any():
             self.boundary_vehicle_steps += int(np.count_nonzero(out))
+            self.boundary_vehicle_steps_cav += int(np.count_nonzero(out & st.is_cav))
             self._boundary_ids.update(np.asarray(st.ids, dtype=object)[out].tolist())
             self.worst_excursion_m = max(self.worst_excursion_m, float(excursion.max()))
             if acc is not None:
@@ -302,6 +304,7 @@ class TrafficRecorder:
                 else np.nan
             ),
             "boundary_vehicle_steps": self.boundary_vehicle_steps,
+            "boundary_vehicle_steps_cav": self.boundary_vehicle_steps_cav,
             "boundary_vehicles": len(self._boundary_ids),
             "worst_boundary_excursion_m": self.worst_excursion_m,
             "collisions_sumo_cav": self.collisions_sumo["cav"],
