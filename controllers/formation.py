@@ -52,6 +52,7 @@ __all__ = [
     "grid_formation",
     "hexagon_formation",
     "oscillation_metrics",
+    "replicate",
     "rollout",
     "signed_distance_errors",
 ]
@@ -171,6 +172,21 @@ def graph_from_reference(reference: np.ndarray, undirected_pairs: np.ndarray) ->
     und = np.asarray(undirected_pairs, dtype=np.intp)
     desired = np.linalg.norm(ref[und[:, 1]] - ref[und[:, 0]], axis=1)
     return FormationGraph.from_undirected(und, desired, reference=ref)
+
+
+def replicate(graph: FormationGraph, copies: int, n: int | None = None) -> FormationGraph:
+    """Disjoint union of ``copies`` independent copies of ``graph`` (for batched runs).
+
+    Copy ``b`` uses agents ``b*n .. b*n + n-1`` (``n`` defaults to ``graph.n_agents``);
+    copies never interact, so one rollout integrates many formations at once.
+    """
+    if int(copies) != copies or copies < 1:
+        raise ValueError(f"copies must be an integer >= 1, got {copies!r}")
+    n = graph.n_agents if n is None else int(n)
+    shift = (np.arange(int(copies)) * n)[:, None, None]
+    pairs = (graph.pairs[None, :, :] + shift).reshape(-1, 2)
+    ref = None if graph.reference is None else np.tile(graph.reference[:n], (int(copies), 1))
+    return FormationGraph(pairs, np.tile(graph.desired, int(copies)), ref)
 
 
 def hexagon_formation(side: float = 10.0) -> FormationGraph:

@@ -366,8 +366,9 @@ def _check_type(section: str, key: str, value: Any, hint: Any) -> Any:
             return tuple(_check_type(section, key, v, args[0]) for v in value)
         if args and len(args) != len(value):
             raise ConfigError(f"{where} must have {len(args)} entries, got {len(value)}")
+        kinds = args or [Any] * len(value)
         return tuple(
-            _check_type(section, key, v, a) for v, a in zip(value, args or [Any] * len(value), strict=True)
+            _check_type(section, key, v, a) for v, a in zip(value, kinds, strict=True)
         )
     if hint is dict or origin is dict:
         if not isinstance(value, dict):
