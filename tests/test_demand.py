@@ -1,0 +1,335 @@
+"""Tests of cosim.demand: route files, their randomness and SUMO's reading of them."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import textwrap
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.demand import (
+    DemandSpec,
+    arrival_times,
+    write_detectors,
+    write_routes,
+)
+from cosim.errors import ConfigError
+from cosim.network_build import NetworkSpec, RoadNetwork, build_network, sumo_binary
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("netcache")
+
+
+@pytest.fixture(scope="module")
+def straight(cache: Path) -> RoadNetwork:
+    return build_network(NetworkSpec(kind="straight", length_m=200.0), cache)
+
+
+@pytest.fixture(scope="module")
+def ring(cache: Path) -> RoadNetwork:
+    return build_network(NetworkSpec(kind="ring", circumference_m=300.0), cache)
+
+
+def _vehicles(path: Path) -> list[ET.Element]:
+    return list(ET.parse(path).getroot().iter("vehicle"))
+
+
+def _vtypes(path: Path) -> dict[str, ET.Element]:
+    return {v.get("id"): v for v in ET.parse(path).getroot().iter("vType")}
+
+
+def run_python(code: str, timeout: float = 60.0) -> dict:
+    """Run ``code`` in a fresh interpreter; it prints one JSON object as its last line."""
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    proc = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=env,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+# --------------------------------------------------------------------------------------
+# Open roads
+# --------------------------------------------------------------------------------------
+
+
+def test_cav_share_and_counts(straight: RoadNetwork, tmp_path: Path) -> None:
+    demand = DemandSpec(inflow_vph=3600.0, cav_share=0.3, duration_s=600.0)
+    info = write_routes(straight, demand, seed=7, path=tmp_path / "r.rou.xml")
+    vehicles = _vehicles(info.path)
+    n = len(vehicles)
+    n_cav = sum(v.get("type").startswith("cav") for v in vehicles)
+    assert n == info.n_main == info.n_cav + info.n_hdv
+    assert n_cav == info.n_cav == len(info.cav_ids)
+    assert abs(n_cav / n - 0.3) <= 0.5 / n + 1e-12  # exact up to rounding
+    assert all(v.get("id").startswith(v.get("type")[:3] + ".") for v in vehicles)
+    assert info.arrival_process == "poisson"
+
+
+def test_same_seed_same_file_other_seed_differs(straight: RoadNetwork, tmp_path: Path) -> None:
+    demand = DemandSpec(inflow_vph=2000.0, duration_s=120.0)
+    a = write_routes(straight, demand, seed=1, path=tmp_path / "a.rou.xml")
+    b = write_routes(straight, demand, seed=1, path=tmp_path / "b.rou.xml")
+    c = write_routes(straight, demand, seed=2, path=tmp_path / "c.rou.xml")
+    text_a = a.path.read_text()
+    assert text_a == b.path.read_text()
+    assert text_a != c.path.read_text()
+    assert a.vehicle_ids == b.vehicle_ids
+
+
+def test_desired_speed_distribution(straight: RoadNetwork, tmp_path: Path) -> None:
+    low, high = 22.0, 30.0
+    demand = DemandSpec(inflow_vph=3600.0, duration_s=1000.0, desired_speed_mps=(low, high))
+    info = write_routes(straight, demand, seed=3, path=tmp_path / "r.rou.xml")
+    vehicles = _vehicles(info.path)
+    v0 = np.array([float(v.get("speedFactor")) * straight.speed_limit_mps for v in vehicles])
+    param = np.array([float(v.find("param").get("value")) for v in vehicles])
+    np.testing.assert_allclose(v0, param, atol=1e-3)
+    assert v0.min() >= low - 1e-3 and v0.max() <= high + 1e-3
+    # Uniform: mean and spread of the distribution (n ~ 1000, 5 standard errors).
+    sd = (high - low) / np.sqrt(12)
+    assert abs(v0.mean() - 0.5 * (low + high)) < 5 * sd / np.sqrt(len(v0))
+    assert v0.std() == pytest.approx(sd, rel=0.1)
+    assert info.desired_speed_mps[vehicles[0].get("id")] == pytest.approx(param[0], abs=1e-3)
+
+
+@pytest.mark.parametrize("process", ["poisson", "uniform"])
+def test_arrival_processes(process: str) -> None:
+    rng = np.random.default_rng(0)
+    t = arrival_times(1800.0, 3600.0, process, rng)
+    assert t.min() >= 0 and t.max() < 3600.0
+    assert abs(len(t) - 1800) < 4 * np.sqrt(1800)
+    cv = np.diff(t).std() / np.diff(t).mean()
+    if process == "poisson":
+        assert cv == pytest.approx(1.0, abs=0.1)  # exponential headways
+    else:
+        assert cv < 1e-6  # constant headways
+
+
+def test_lateral_departures_stay_on_the_road(straight: RoadNetwork, tmp_path: Path) -> None:
+    demand = DemandSpec(inflow_vph=3600.0, duration_s=300.0)
+    info = write_routes(straight, demand, seed=5, path=tmp_path / "r.rou.xml")
+    types = _vtypes(info.path)
+    lat = np.array([float(v.get("departPosLat")) for v in _vehicles(info.path)])
+    width = np.array([float(types[v.get("type")].get("width")) for v in _vehicles(info.path)])
+    assert np.all(np.abs(lat) + width / 2 <= straight.width_m / 2)
+    assert lat.min() < -3.0 and lat.max() > 3.0  # spread across the lane, not centred
+    hdv = types["hdv_0"]
+    assert hdv.get("laneChangeModel") == "SL2015" and hdv.get("latAlignment") == "arbitrary"
+    assert {k for k in types} == {f"{p}_{i}" for p in ("cav", "hdv") for i in range(4)}
+    sizes = [(float(t.get("length")), float(t.get("width"))) for t in types.values()]
+    assert min(sizes) >= (3.2, 1.6) and max(sizes) <= (5.15, 1.84)
+
+
+def test_onramp_demand_has_ramp_vehicles(cache: Path, tmp_path: Path) -> None:
+    net = build_network(
+        NetworkSpec(kind="onramp", length_m=400.0, merge_position_m=150.0, ramp_length_m=100.0),
+        cache,
+    )
+    demand = DemandSpec(inflow_vph=1800.0, ramp_inflow_vph=600.0, duration_s=600.0)
+    info = write_routes(net, demand, seed=1, path=tmp_path / "r.rou.xml")
+    vehicles = _vehicles(info.path)
+    ramp = [v for v in vehicles if v.get("route") == "ramp"]
+    assert len(ramp) == info.n_ramp and 60 < info.n_ramp < 140
+    assert all(abs(float(v.get("departPosLat"))) < net.ramp_width_m / 2 for v in ramp)
+    departs = [float(v.get("depart")) for v in vehicles]
+    assert departs == sorted(departs)  # SUMO needs route files sorted by departure
+
+
+def test_three_lane_demand_uses_lanes(cache: Path, tmp_path: Path) -> None:
+    net = build_network(NetworkSpec(kind="three_lane", length_m=200.0), cache)
+    info = write_routes(net, DemandSpec(duration_s=300.0), seed=1, path=tmp_path / "r.rou.xml")
+    vehicles = _vehicles(info.path)
+    assert {v.get("departLane") for v in vehicles} == {"0", "1", "2"}
+    assert all(v.get("departPosLat") is None for v in vehicles)
+    assert _vtypes(info.path)["hdv_0"].get("laneChangeModel") == "LC2013"
+
+
+# --------------------------------------------------------------------------------------
+# Ring
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("placement", ["even", "random"])
+def test_ring_density_is_exact_and_vehicles_do_not_overlap(
+    ring: RoadNetwork, tmp_path: Path, placement: str
+) -> None:
+    demand = DemandSpec(ring_density_vpkm=80.0, ring_placement=placement, duration_s=60.0)
+    info = write_routes(ring, demand, seed=4, path=tmp_path / "ring.rou.xml")
+    n = round(80.0 * ring.length_m / 1000.0)
+    assert info.n_ring == n == len(info.ring_vehicle_ids)
+    assert info.ring_density_vpkm == pytest.approx(1000.0 * n / ring.length_m)
+    types = _vtypes(info.path)
+    routes = {r.get("id"): r for r in ET.parse(info.path).getroot().iter("route")}
+    front, lat, length, width = [], [], [], []
+    for v in _vehicles(info.path):
+        assert v.get("depart") == "0.00" and v.get("insertionChecks") == "none"
+        route = routes[v.get("route")]
+        assert int(route.get("repeat")) == info.ring_route_repeat
+        first_edge = route.get("edges").split()[0]
+        front.append(ring.s_of(first_edge, float(v.get("departPos"))))
+        lat.append(float(v.get("departPosLat")))
+        length.append(float(types[v.get("type")].get("length")))
+        width.append(float(types[v.get("type")].get("width")))
+    centre = np.array(front) - 0.5 * np.array(length)
+    lat, length, width = np.array(lat), np.array(length), np.array(width)
+    assert np.all(np.abs(lat) + width / 2 <= ring.width_m / 2)
+    ds = np.abs(centre[:, None] - centre[None, :])
+    ds = np.minimum(ds, ring.length_m - ds)
+    overlap = (ds < 0.5 * (length[:, None] + length[None, :])) & (
+        np.abs(lat[:, None] - lat[None, :]) < 0.5 * (width[:, None] + width[None, :])
+    )
+    np.fill_diagonal(overlap, False)
+    assert not overlap.any()
+    # Routes are long enough to circle for the demand's duration at the vType's max speed.
+    assert info.ring_route_repeat * ring.length_m >= 60.0 * 60.0
+
+
+def test_ring_density_too_high_is_a_config_error(ring: RoadNetwork, tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="ring_density_vpkm"):
+        write_routes(ring, DemandSpec(ring_density_vpkm=2000.0), 1, tmp_path / "r.rou.xml")
+    with pytest.raises(ConfigError, match="ring_density_vpkm"):
+        write_routes(ring, DemandSpec(ring_density_vpkm=0.0), 1, tmp_path / "r.rou.xml")
+
+
+@pytest.mark.sumo
+def test_sumo_inserts_the_whole_ring_at_t0_and_keeps_it(ring: RoadNetwork, tmp_path: Path) -> None:
+    demand = DemandSpec(ring_density_vpkm=40.0, duration_s=60.0)
+    info = write_routes(ring, demand, seed=9, path=tmp_path / "ring.rou.xml")
+    out = run_python(f"""
+        import json
+        import xml.etree.ElementTree as ET
+        import libsumo as t
+        from cosim.network_build import NetworkSpec, build_network
+        net = build_network(NetworkSpec(kind="ring", circumference_m=300.0),
+                            {str(Path(ring.net_file).parents[1])!r})
+        t.start(["sumo", "-n", str(net.net_file), "-r", {str(info.path)!r}, "--no-step-log",
+                 "true", "--lateral-resolution", "0.8", "--step-length", "0.1", "--seed", "9",
+                 "--collision.action", "warn"])
+        t.simulationStep()
+        n0 = t.vehicle.getIDCount()
+        xml = {{v.get("id"): v for v in ET.parse({str(info.path)!r}).getroot().iter("vehicle")}}
+        pos_err = max(abs(t.vehicle.getLanePosition(v) - float(xml[v].get("departPos")))
+                      for v in t.vehicle.getIDList())
+        lat_err = max(abs(t.vehicle.getLateralLanePosition(v) - float(xml[v].get("departPosLat")))
+                      for v in t.vehicle.getIDList())
+        factor = max(abs(t.vehicle.getSpeedFactor(v) - float(xml[v].get("speedFactor")))
+                     for v in t.vehicle.getIDList())
+        collisions = 0
+        for _ in range(600):
+            t.simulationStep()
+            collisions += t.simulation.getCollidingVehiclesNumber()
+        print(json.dumps({{"n0": n0, "n60": t.vehicle.getIDCount(), "pos_err": pos_err,
+                          "lat_err": lat_err, "factor": factor, "collisions": collisions,
+                          "arrived": t.simulation.getArrivedNumber()}}))
+        t.close()
+    """)
+    assert out["n0"] == info.n_ring == 12
+    assert out["pos_err"] < 1e-9 and out["lat_err"] < 1e-9 and out["factor"] < 1e-9
+    assert out["n60"] == info.n_ring and out["arrived"] == 0
+    assert out["collisions"] == 0
+
+
+# --------------------------------------------------------------------------------------
+# Detectors
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.sumo
+def test_sumo_writes_detector_outputs(straight: RoadNetwork, tmp_path: Path) -> None:
+    demand = DemandSpec(inflow_vph=2400.0, duration_s=60.0)
+    routes = write_routes(straight, demand, seed=2, path=tmp_path / "r.rou.xml")
+    out_dir = tmp_path / "out"
+    det = write_detectors(straight, [50.0, 150.0], tmp_path / "det.add.xml", 30.0, out_dir)
+    assert det.loop_s_m == pytest.approx((50.0, 150.0))
+    proc = subprocess.run(
+        [
+            str(sumo_binary("sumo")),
+            "-n",
+            str(straight.net_file),
+            "-r",
+            str(routes.path),
+            "-a",
+            str(det.path),
+            "--lateral-resolution",
+            "0.8",
+            "--end",
+            "60",
+            "--no-step-log",
+            "true",
+            "--seed",
+            "2",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+    assert proc.returncode == 0, proc.stderr[-1000:]
+    counts = []
+    for f in det.loop_files:
+        intervals = list(ET.parse(f).getroot().iter("interval"))
+        assert [float(i.get("end")) for i in intervals] == [30.0, 60.0]
+        counts.append(sum(int(i.get("nVehContrib")) for i in intervals))
+    edges = list(ET.parse(det.edgedata_file).getroot().iter("edge"))
+    departed = sum(int(e.get("departed")) for e in edges)
+    arrived = sum(int(e.get("arrived")) for e in edges)
+    assert departed > 20
+    # Loops across the whole 10.2 m lane catch every vehicle whatever its lateral position:
+    # everyone who arrived at 200 m passed 150 m, and at most a few are between the two.
+    assert counts[0] >= counts[1] >= arrived
+    assert counts[1] - arrived <= 3
+    assert departed - counts[0] <= 3
+
+
+# --------------------------------------------------------------------------------------
+# Validation
+# --------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "field"),
+    [
+        ({"cav_share": 1.5}, "cav_share"),
+        ({"cav_share": -0.1}, "cav_share"),
+        ({"inflow_vph": -1.0}, "inflow_vph"),
+        ({"ramp_inflow_vph": float("inf")}, "ramp_inflow_vph"),
+        ({"ring_density_vpkm": -3.0}, "ring_density_vpkm"),
+        ({"desired_speed_mps": (30.0, 20.0)}, "desired_speed_mps"),
+        ({"desired_speed_mps": (0.0, 20.0)}, "desired_speed_mps"),
+        ({"duration_s": 0.0}, "duration_s"),
+        ({"depart_lateral": "left"}, "depart_lateral"),
+        ({"depart_speed": "fast"}, "depart_speed"),
+        ({"arrivals": "bursty"}, "arrivals"),
+        ({"ring_placement": "grid"}, "ring_placement"),
+        ({"size_classes": ((4.0, -1.0, 1.0),)}, "size_classes"),
+        ({"size_classes": ((4.0, 1.8, 0.0),)}, "size_classes"),
+        ({"size_classes": ()}, "size_classes"),
+    ],
+)
+def test_bad_demand_raises_config_error_naming_the_field(kwargs: dict, field: str) -> None:
+    with pytest.raises(ConfigError, match=field) as err:
+        DemandSpec(**kwargs)
+    assert "\n" not in str(err.value)
+
+
+def test_bad_detector_period(straight: RoadNetwork, tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="period_s"):
+        write_detectors(straight, [50.0], tmp_path / "d.add.xml", 0.0, tmp_path)
+    with pytest.raises(ConfigError, match="outside the road"):
+        write_detectors(straight, [500.0], tmp_path / "d.add.xml", 10.0, tmp_path)
