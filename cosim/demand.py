@@ -58,6 +58,8 @@ MIN_GAP_LAT_M = 0.5
 #: Maximum lateral speed of SL2015 drivers, m/s.
 MAX_SPEED_LAT_MPS = 1.5
 #: Krauss driver imperfection of human drivers (CAVs: 0).
+CAV_TAU_S = 0.5  # s
+HDV_TAU_S = 1.0  # s, SUMO's default
 HDV_SIGMA = 0.5
 #: vType maxSpeed, m/s: a cap above any desired speed so SUMO never clips a controller.
 VTYPE_MAX_SPEED_MPS = 60.0
@@ -462,8 +464,12 @@ def vtype_lines(demand: DemandSpec, lanes: bool) -> list[str]:
     ``latAlignment="arbitrary"``; ``lanes=True`` (three_lane baseline) gives LC2013.
     """
     out = []
-    for kind, colour, sigma in ((CAV_PREFIX, "0,90,255", 0.0), (HDV_PREFIX, "200,200,200",
-                                                                  HDV_SIGMA)):
+    # CAVs get a short reaction time ``tau`` so that SUMO's insertion check lets
+    # them enter at CAV headways (our controller drives them from the first step).
+    for kind, colour, sigma, tau in (
+        (CAV_PREFIX, "0,90,255", 0.0, CAV_TAU_S),
+        (HDV_PREFIX, "200,200,200", HDV_SIGMA, HDV_TAU_S),
+    ):
         for k, (length, width, _p) in enumerate(demand.size_classes):
             lc = (
                 'laneChangeModel="LC2013"'
@@ -475,7 +481,7 @@ def vtype_lines(demand: DemandSpec, lanes: bool) -> list[str]:
                 f'    <vType id="{kind}_{k}" vClass="passenger" length="{length}" '
                 f'width="{width}" minGap="{MIN_GAP_M}" accel="{ACCEL_MPS2}" '
                 f'decel="{DECEL_MPS2}" emergencyDecel="{EMERGENCY_DECEL_MPS2}" '
-                f'maxSpeed="{VTYPE_MAX_SPEED_MPS}" speedDev="0" sigma="{sigma}" '
+                f'maxSpeed="{VTYPE_MAX_SPEED_MPS}" speedDev="0" sigma="{sigma}" tau="{tau}" '
                 f'color="{colour}" {lc}>\n'
                 f'        <param key="cosim.kind" value="{kind}"/>\n'
                 f"    </vType>"
