@@ -26,9 +26,10 @@ Beyond the paper, for road vehicles:
   eq. 5) measured from the vehicle's side; an agent already beyond a wall is
   still pushed back in.
 * the repulsion ``phi_beta(z) n_hat(z)`` of the paper vanishes at contact
-  (``n_hat`` is proportional to ``z``); for walls and vehicles the gap is
-  floored at half the desired spacing, so the repulsion is monotone and at
-  its largest for agents in contact or past a wall (a saturated barrier).
+  (``n_hat`` is proportional to ``z``); for walls, circles and vehicles the
+  gap is floored at the gap where that repulsion peaks, so the barrier is
+  monotone and at its largest for agents in contact, inside or past it (a
+  saturated barrier).
 """
 
 from __future__ import annotations
@@ -86,7 +87,20 @@ class OlfatiSaberController:
         self.d_beta = float(sigma_norm_scalar(p.d_beta, eps))
         self.d_vehicle = float(sigma_norm_scalar(p.d_vehicle, eps))
         self.d_wall = float(sigma_norm_scalar(p.d_wall, eps))
+        # Gap (m) at which the beta repulsion |phi_beta(z) n_hat(z)| peaks: below it
+        # the gap is floored so the barrier is monotone (see module docstring).
+        self.wall_floor = self._repulsion_peak(p.d_wall, self.d_wall)
+        self.vehicle_floor = self._repulsion_peak(p.d_vehicle, self.d_vehicle)
+        self.circle_floor = self._repulsion_peak(p.d_beta, self.d_beta)
         self.last_terms: FlockTerms | None = None
+
+    def _repulsion_peak(self, d_m: float, d_sigma: float) -> float:
+        """Gap in (0, d_m] where ``|phi_beta(||z||_sigma)| ||n_hat(z)||`` is largest, m."""
+        p = self.params
+        z = np.linspace(1e-4, d_m, 2001)
+        zs = sigma_norm_scalar(z, p.epsilon)
+        force = -phi_beta(zs, d_sigma, p.h_beta) * z / np.sqrt(1.0 + p.epsilon * z * z)
+        return float(z[int(np.argmax(force))])
 
     # ------------------------------------------------------------------
     def compute(self, obs: Observation) -> np.ndarray:
@@ -158,12 +172,14 @@ class OlfatiSaberController:
         dist = np.maximum(dist, 1e-9)
         a_k = v / dist[..., None]
         mu = radius[None, :] / dist
-        gap = np.abs(dist - radius[None, :])
-        ii, kk = np.nonzero(gap < p.r_beta)
+        ii, kk = np.nonzero(dist - radius[None, :] < p.r_beta)
         if len(ii) == 0:
             return np.zeros((n, m))
         ak = a_k[ii, kk]
-        q_hat_rel = (mu[ii, kk] - 1.0)[:, None] * v[ii, kk]  # q_hat - q = (mu - 1)(q - y)
+        # q_hat - q = (mu - 1)(q - y) = -a_k (||q - y|| - R); the signed gap is floored
+        # (agents inside the circle are pushed out along the outward normal a_k).
+        signed = dist[ii, kk] - radius[kk]
+        q_hat_rel = -ak * np.maximum(signed, self.circle_floor)[:, None]
         p_i = obs.p[ii]
         p_hat = mu[ii, kk][:, None] * (p_i - ak * np.sum(ak * p_i, axis=1, keepdims=True))
         f = self._beta_pair(q_hat_rel, p_hat - p_i, self.d_beta, p.c1_beta, p.c2_beta)
@@ -196,7 +212,7 @@ class OlfatiSaberController:
         if len(near) == 0:
             return np.zeros((n, m))
         a = normal[near]
-        gap = np.maximum(signed_gap[near], 0.5 * p.d_wall)
+        gap = np.maximum(signed_gap[near], self.wall_floor)
         dq_hat = -a * gap[:, None]
         p_i = obs.p[near]
         p_hat = p_i - a * np.sum(a * p_i, axis=1, keepdims=True)
@@ -236,7 +252,7 @@ class OlfatiSaberController:
             out[np.arange(len(axis)), axis] = sign
             dq_hat[inside] = -out * _MIN_GAP
         gap = np.linalg.norm(dq_hat * s, axis=1)
-        floor = 0.5 * p.d_vehicle
+        floor = self.vehicle_floor
         short = gap < floor
         if short.any():
             dq_hat[short] *= (floor / np.maximum(gap[short], _MIN_GAP))[:, None]

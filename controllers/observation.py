@@ -118,20 +118,26 @@ class Observation:
         for name in ("length", "width"):
             v = getattr(self, name)
             if v is not None:
-                v = np.broadcast_to(np.asarray(v, dtype=float), (n,))
-                object.__setattr__(self, name, v)
+                v = np.asarray(v, dtype=float)
+                if v.shape not in ((), (1,), (n,)):
+                    raise ValueError(f"{name} must have shape ({n},), got {v.shape}")
+                object.__setattr__(self, name, np.broadcast_to(v, (n,)))
         if self.others_q is not None:
-            oq = np.asarray(self.others_q, dtype=float).reshape(-1, q.shape[1])
-            op = (
-                np.zeros_like(oq)
-                if self.others_p is None
-                else np.asarray(self.others_p, dtype=float).reshape(oq.shape)
-            )
+            oq = np.asarray(self.others_q, dtype=float)
+            if oq.size == 0:
+                oq = oq.reshape(0, q.shape[1])
+            if oq.ndim != 2 or oq.shape[1] != q.shape[1]:
+                raise ValueError(f"others_q must have shape (M, {q.shape[1]}), got {oq.shape}")
+            op = np.zeros_like(oq) if self.others_p is None else np.asarray(self.others_p, float)
+            if op.shape != oq.shape:
+                raise ValueError(f"others_p has shape {op.shape} but others_q has {oq.shape}")
             object.__setattr__(self, "others_q", oq)
             object.__setattr__(self, "others_p", op)
             for name in ("others_length", "others_width"):
                 v = getattr(self, name)
                 v = np.zeros(len(oq)) if v is None else np.asarray(v, dtype=float)
+                if v.shape not in ((), (1,), (len(oq),)):
+                    raise ValueError(f"{name} must have shape ({len(oq)},), got {v.shape}")
                 object.__setattr__(self, name, np.broadcast_to(v, (len(oq),)))
         if self.road_edges is not None:
             re = np.asarray(self.road_edges, dtype=float)

@@ -27,7 +27,10 @@ def nearest_neighbour_distances(q: np.ndarray, period: float | None = None) -> n
     """Distance from each agent to its nearest other agent, (N,) m (inf if N < 2)."""
     if len(q) < 2:
         return np.full(len(q), np.inf)
-    pts, box = tree_points(np.asarray(q, dtype=float), 1.0, period)
+    q = np.asarray(q, dtype=float)
+    # The lateral box must exceed the lateral span so that only axis 0 wraps.
+    span = float(np.ptp(q[:, 1:])) if q.shape[1] > 1 else 0.0
+    pts, box = tree_points(q, max(1.0, span), period)
     dist, _ = cKDTree(pts, boxsize=box).query(pts, k=2)
     return dist[:, 1]
 

@@ -159,14 +159,15 @@ class PlaneWorld:
     def step(self) -> None:
         """One control step: observe, compute u, integrate, move the reference."""
         obs = self.observation()
+        obs.check_finite()
         if self.k % self.metrics_every == 0:
             self._record_metrics(obs)
-        if self.record_every and self.k % self.record_every == 0:
-            self._record_traj()
         u = np.asarray(self.controller.compute(obs), dtype=float)
         if u.shape != self.q.shape:
             raise ValueError(f"controller returned u of shape {u.shape}, expected {self.q.shape}")
         self.u = u
+        if self.record_every and self.k % self.record_every == 0:
+            self._record_traj()  # the row at t holds the command applied from t
         if self.integrator == "euler":
             self.q = self.q + self.p * self.dt
             self.p = self.p + u * self.dt
@@ -190,6 +191,7 @@ class PlaneWorld:
         obs = self.observation()
         self._record_metrics(obs)
         if self.record_every:
+            self.u = np.full_like(self.q, np.nan)  # no command after the last step
             self._record_traj()
         return self.result()
 
