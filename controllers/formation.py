@@ -54,7 +54,9 @@ __all__ = [
     "oscillation_metrics",
     "replicate",
     "rollout",
+    "damping_ratios",
     "signed_distance_errors",
+    "stiffness_matrix",
 ]
 
 
@@ -366,6 +368,50 @@ class FormationController:
         return _accumulate(i, per_pair, obs.n) + self.leader_term(obs)
 
 
+def stiffness_matrix(graph: FormationGraph, q: np.ndarray, K_for: float) -> np.ndarray:
+    """Jacobian ``d u_formation / d q`` at configuration ``q`` (N, m): (N*m, N*m), 1/s^2.
+
+    Dense, for analysing small formations. For ordered pair (i, j) with
+    ``r = q_j - q_i``: ``d u_i / d q_j = K_for ((|r|^2 - delta^2) I + 2 r r^T) = -d u_i / d q_i``.
+    """
+    q = np.asarray(q, dtype=float)
+    n, m = q.shape
+    i, j = graph.pairs.T
+    r = q[j] - q[i]
+    w = np.sum(r**2, axis=1) - graph.desired**2
+    blocks = K_for * (w[:, None, None] * np.eye(m) + 2.0 * r[:, :, None] * r[:, None, :])
+    J = np.zeros((n, m, n, m))
+    np.add.at(J, (i, slice(None), j), blocks)
+    np.add.at(J, (i, slice(None), i), -blocks)
+    return J.reshape(n * m, n * m)
+
+
+def damping_ratios(graph: FormationGraph, params: FormationParams, q: np.ndarray | None = None):
+    """Damping ratios of the linearised closed loop about a formation ``q`` (default: reference).
+
+    Continuous time, no leader: ``d/dt [dq, dp] = [[0, I], [S, -K_vel L (x) I]] [dq, dp]``
+    with ``S`` = :func:`stiffness_matrix` and ``L`` the graph Laplacian. Returns the
+    ratios ``zeta = -Re(s) / |s|`` (dimensionless) of the eigenvalues ``s`` with
+    ``|s| > 1e-6 max|s|`` (rigid-body translation/rotation and common-velocity modes dropped),
+    sorted ascending. ``zeta < 1`` for a complex pair = oscillatory mode: the seed's
+    "oscillatory trends" appear when ``min(zeta)`` drops; it falls roughly as
+    ``K_vel / sqrt(K_for * delta^2)``.
+    """
+    q = graph.reference if q is None else np.asarray(q, dtype=float)
+    if q is None:
+        raise ValueError("q is required when the graph has no reference configuration")
+    n, m = q.shape
+    S = stiffness_matrix(graph, q, params.K_for)
+    A = np.zeros((n, n))
+    np.add.at(A, (graph.pairs[:, 0], graph.pairs[:, 1]), 1.0)
+    lap = np.kron(np.diag(A.sum(axis=1)) - A, np.eye(m))
+    top = np.hstack([np.zeros((n * m, n * m)), np.eye(n * m)])
+    bottom = np.hstack([S, -params.K_vel * lap])
+    s = np.linalg.eigvals(np.vstack([top, bottom]))
+    s = s[np.abs(s) > 1e-6 * np.abs(s).max()]
+    return np.sort(-s.real / np.abs(s))
+
+
 def rollout(
     controller: FormationController,
     q0: np.ndarray,
@@ -434,14 +480,26 @@ def oscillation_metrics(
       ``||q_j - q_i|| - delta_ij``, counted only when it leaves a band of +-``tol`` m
       (default 1 % of the smallest ``delta``) — each is one overshoot of the target.
 
-    Also ``t_settle`` (s) = ``t*`` and ``e_final`` (m) = ``e`` at the last sample.
+    Also ``t_settle`` (s) = ``t*`` and ``e_final`` (m) = ``e`` at the last sample. If the
+    run never gets below ``settle_frac * max(e)``, ``t_settle`` and the after-``t*``
+    measures are nan (the run was too short to judge).
     """
     tol = 0.01 * float(graph.desired.min()) if tol is None else float(tol)
     eps = signed_distance_errors(Q, graph.pairs, graph.desired)  # (T+1, E)
     e = np.sqrt(np.mean(eps**2, axis=1))
-    k0 = int(np.argmax(e <= settle_frac * e.max()))
-    if e[k0] > settle_frac * e.max():  # never settled
-        k0 = len(e) - 1
+    settled = e <= settle_frac * e.max()
+    overshoots_total = float(np.mean(_band_crossings(eps, tol)))
+    if not settled.any():
+        nan = float("nan")
+        return {
+            "t_settle": nan,
+            "e_final": float(e[-1]),
+            "max_rebound": nan,
+            "rebound": nan,
+            "overshoots": nan,
+            "overshoots_total": overshoots_total,
+        }
+    k0 = int(np.argmax(settled))
     tail = e[k0:]
     rise = tail - np.minimum.accumulate(tail)
     return {
@@ -450,6 +508,7 @@ def oscillation_metrics(
         "max_rebound": float(rise.max()),
         "rebound": float(np.sum(np.clip(np.diff(tail), 0.0, None))),
         "overshoots": float(np.mean(_band_crossings(eps[k0:], tol))),
+        "overshoots_total": overshoots_total,
     }
 
 

@@ -313,8 +313,7 @@ PEAK = peak_gap(3.0)  # about 2.4 m for eps = 0.1, d = 3 m, h = 0.9
 @pytest.mark.parametrize("gap", [1.5, 1.0, 0.0, -0.5, -2.0, -10.0])
 def test_wall_and_road_edge_push_inward_also_at_or_beyond_the_edge(gap, edges):
     # Saturated barrier: gaps below the repulsion peak (~2.4 m) count as the peak gap, so an agent
-    # or past the edge is pushed in with the 1.5 m value 150 (1 - sigma_1(sig(1.5) - sig(3)))
-    # * 1.5 / sqrt(1.225) = 394 m/s^2 (hand value).
+    # in contact with or past the edge is pushed in with the peak value (about 509 m/s^2).
     push = wall_push(gap, edges=edges)
     assert push == pytest.approx(beta_push(PEAK), rel=1e-5)
     assert push > 500.0
