@@ -323,6 +323,10 @@ def formation_potential(q: np.ndarray, graph: FormationGraph) -> float:
 class FormationController:
     """Seed-002 law over a constraint graph; vectorised over the E constraints.
 
+    Graph index k is row k of the observation (``obs.q[k]``); the world must hand the
+    formation's members in the graph's order (rows beyond the graph get only the
+    leader terms).
+
     ``compute(obs)`` returns ``u`` (N, m) in m/s^2 for any m in {1, 2, 3}.
     Periodic axis 0 (``obs.period_s``) is honoured through :meth:`Observation.relative`.
     """
@@ -386,7 +390,9 @@ def stiffness_matrix(graph: FormationGraph, q: np.ndarray, K_for: float) -> np.n
     return J.reshape(n * m, n * m)
 
 
-def damping_ratios(graph: FormationGraph, params: FormationParams, q: np.ndarray | None = None):
+def damping_ratios(
+    graph: FormationGraph, params: FormationParams, q: np.ndarray | None = None
+) -> np.ndarray:
     """Damping ratios of the linearised closed loop about a formation ``q`` (default: reference).
 
     Continuous time, no leader: ``d/dt [dq, dp] = [[0, I], [S, -K_vel L (x) I]] [dq, dp]``

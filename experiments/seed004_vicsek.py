@@ -49,6 +49,13 @@ METRICS = (
     "dispersion",
     "mean_speed",
 )
+LABELS = {
+    "eta": "eta (rad)",
+    "density": "density N/L^2 (1/m^2)",
+    "r": "radius r (m)",
+    "sigma": "noise_factor sigma (m/s)",
+    "alpha": "velocity_matching alpha (-)",
+}
 REPORT = VicsekParams(n=100, L=100.0, r=10.0, v0=0.5, dt=1.0, periodic=True)  # Step 1a
 
 
@@ -147,6 +154,7 @@ def noise_dependence(out: Path, n_steps: int, seeds: int, etas, sigmas, workers)
     s = df[df.rule == "seed004"].groupby("sigma")[["order_parameter", "mean_speed"]].mean()
     axes[1].semilogx(s.index, s.order_parameter, "o-", label="phi (global)")
     axes[1].set(xlabel="noise_factor sigma (m/s)", ylabel="phi (-)", title="rule seed004")
+    axes[1].set_ylim(0.0, 1.0)
     ax2 = axes[1].twinx()
     ax2.loglog(s.index, s.mean_speed, "r^--", label="mean speed")
     ax2.set_ylabel("mean speed (m/s)", color="r")
@@ -166,7 +174,7 @@ def heatmap(out: Path, name: str, df: pd.DataFrame, x: str, y: str, metric: str,
     ax.set_yticks(range(grid.shape[0]), [f"{r:.3g}" for r in grid.index])
     for (i, j), val in np.ndenumerate(grid.values):
         ax.text(j, i, f"{val:.2f}", ha="center", va="center", fontsize=7, color="w")
-    ax.set(xlabel=x, ylabel=y, title=title)
+    ax.set(xlabel=LABELS.get(x, x), ylabel=LABELS.get(y, y), title=title)
     fig.colorbar(im, ax=ax, label=metric)
     fig.tight_layout()
     fig.savefig(out / f"{name}.png", dpi=120)
