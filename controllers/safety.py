@@ -11,8 +11,10 @@ Rules, applied in this order to CAV ``i`` with command ``u_i``:
    the vehicle can always stop laterally before the edge.
 2. **Side clearance** (lateral): vehicles that overlap longitudinally (with a
    speed-dependent buffer ahead and behind) bound the next lateral position so
-   that the side-to-side clearance stays above ``lateral_clearance``; a vehicle
-   never moves sideways into a gap that is already too small.
+   that the side-to-side clearance stays above ``lateral_clearance`` even if
+   the neighbour also moves towards it in the same step (a CAV by up to
+   ``lat_speed_max dt``, another vehicle by its current lateral speed times
+   ``dt``); a vehicle never moves sideways into a gap that is already too small.
 3. **Safe speed** (longitudinal, Krauss 1998 / SUMO's default model): with
    ``g`` the bumper-to-bumper gap minus ``min_gap`` to the nearest vehicle
    ahead that overlaps laterally anywhere along the lateral move, the next speed
@@ -75,7 +77,7 @@ class RoadState:
     """All vehicles on the road (M of them), SI units.
 
     ``s``, ``d`` (M,) centre positions, m; ``v`` (M,) longitudinal speed, m/s;
-    ``length``, ``width`` (M,) m.
+    ``length``, ``width`` (M,) m; ``v_lat`` (M,) lateral speed, m/s (None: 0).
     """
 
     s: np.ndarray
@@ -83,6 +85,7 @@ class RoadState:
     v: np.ndarray
     length: np.ndarray
     width: np.ndarray
+    v_lat: np.ndarray | None = None
 
 
 @dataclass
@@ -165,7 +168,10 @@ class SafetyLayer:
         buf = np.where(ds >= 0, closing_ahead, closing_behind) * c.cut_in_time_s + c.min_gap_m
         beside = np.abs(ds) < half_l + buf
         dd = road.d[j] - d[i]
-        need = half_w + c.lateral_clearance_m
+        # Worst-case lateral step of the neighbour towards i during this step.
+        shift = np.zeros(len(road.s)) if road.v_lat is None else np.abs(road.v_lat) * dt
+        shift[cav_index] = c.lat_speed_max_mps * dt
+        need = half_w + c.lateral_clearance_m + shift[j]
         hi_side = np.full(n, np.inf)
         lo_side = np.full(n, -np.inf)
         left = beside & (dd >= 0)

@@ -768,6 +768,11 @@ def load_road_network(
         ramp_width = _edge_width(net.getEdge(ramp_route[0]))
     if speed_limit_mps is None:
         speed_limit_mps = float(_reference_lane(net.getEdge(main_route[0])).getSpeed())
+    if not speed_limit_mps > 0:
+        raise NetworkError(
+            f"network {path.name}: the speed limit of edge {main_route[0]!r} must be > 0 m/s "
+            f"(got {speed_limit_mps})"
+        )
     return RoadNetwork(
         net_file=path.resolve(),
         kind=kind,

@@ -26,7 +26,7 @@ from controllers.safety import RoadState, SafetyConfig, SafetyLayer
 from . import __version__
 from .config import Scenario
 from .demand import write_detectors, write_routes
-from .errors import CosimError, SumoStartError
+from .errors import ConfigError, CosimError, SumoStartError
 from .flock_metrics import flock_metrics
 from .network_build import build_network, sumo_version
 from .sumo_world import SumoWorld
@@ -76,13 +76,29 @@ def versions() -> dict[str, str]:
 
 
 def _measurement_layout(sc: Scenario, length: float, periodic: bool):
+    """Edie zone (start, end) and flow cross-sections along the main route, m (validated)."""
     o = sc.outputs
     if periodic:
         zone = (0.0, length)
     else:
-        end = o.zone_end_m or max(length - 100.0, o.zone_start_m + 1.0)
+        if o.zone_start_m >= length:
+            raise ConfigError(
+                f"outputs.zone_start_m = {o.zone_start_m} m lies beyond the road "
+                f"(main route length {length:.1f} m)"
+            )
+        if o.zone_end_m > length:
+            raise ConfigError(
+                f"outputs.zone_end_m = {o.zone_end_m} m lies beyond the road "
+                f"(main route length {length:.1f} m)"
+            )
+        end = o.zone_end_m or max(length - 100.0, 0.5 * (o.zone_start_m + length))
         zone = (o.zone_start_m, min(end, length))
     xs = o.cross_sections_m or (zone[0], 0.5 * (zone[0] + zone[1]), zone[1] - 1.0)
+    for x in xs:
+        if not 0.0 <= x <= length:
+            raise ConfigError(
+                f"outputs.cross_sections_m: {x} m is outside the road [0, {length:.1f}] m"
+            )
     return zone, tuple(xs)
 
 
@@ -129,8 +145,10 @@ def run_scenario(
         result = _loop(sc, net, world, routes, zone, xs, progress)
     except CosimError:
         raise
-    except Exception as exc:  # a SUMO crash mid-run
-        raise SumoStartError(f"SUMO failed during the run: {exc}") from None
+    except Exception as exc:
+        if _is_sumo_error(exc):  # a SUMO crash mid-run; anything else is our bug: traceback
+            raise SumoStartError(f"SUMO failed during the run: {exc}") from None
+        raise
     finally:
         world.close()
 
@@ -157,6 +175,14 @@ def run_scenario(
     if out_dir is not None:
         result.write(out_dir)
     return result
+
+
+def _is_sumo_error(exc: BaseException) -> bool:
+    """True for exceptions raised by libsumo/TraCI (their classes live in those modules)."""
+    mod = type(exc).__module__ or ""
+    return mod.startswith(("libsumo", "traci")) or type(exc).__name__ in (
+        "TraCIException", "FatalTraCIError"
+    )
 
 
 def _build_controller(sc: Scenario):
@@ -356,7 +382,7 @@ def _control_step(sc, net, world, controller, safety, va, cav_rows, idx_main, ed
         u[:, 1] = np.clip(u[:, 1], -sc.limits.lat_max_mps2, sc.limits.lat_max_mps2)
     if sc.safety.enabled:
         road = RoadState(va.s[idx_main], va.d[idx_main], va.v[idx_main],
-                         va.length[idx_main], va.width[idx_main])
+                         va.length[idx_main], va.width[idx_main], va.v_lat[idx_main])
         u, v_lat_next = safety.apply(u, pos_in_main, p[:, 1], road, edges, period)
     else:
         v_lat_next = np.clip(p[:, 1] + u[:, 1] * dt, -sc.limits.lat_speed_max_mps,

@@ -13,7 +13,11 @@ default Euler update); the lateral double integrator is integrated here as
 
 from __future__ import annotations
 
+import contextlib
+import os
 import shutil
+import sys
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -58,6 +62,37 @@ def sumo_binary(gui: bool = False) -> str:
     if found:
         return found
     raise SumoStartError(f"{name} binary not found (install the eclipse-sumo package)")
+
+
+_CAPTURED: list[str] = []
+
+
+def captured_lines() -> list[str]:
+    """Lines SUMO wrote to stderr during the last :func:`_captured_stderr` block."""
+    return list(_CAPTURED)
+
+
+@contextlib.contextmanager
+def _captured_stderr():
+    """Redirect file descriptor 2 (where libsumo's C++ code writes) into a buffer.
+
+    SUMO prints its own ``Error: ...`` lines there when it refuses its input; we
+    fold them into one error line instead of letting them reach the terminal.
+    """
+    _CAPTURED.clear()
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile(mode="w+b") as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield _CAPTURED
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            _CAPTURED.extend(
+                x.strip() for x in tmp.read().decode(errors="replace").splitlines() if x.strip()
+            )
 
 
 @dataclass
@@ -116,12 +151,15 @@ class SumoWorld:
             else:
                 import libsumo
 
-                libsumo.start(self.cmd)
+                with _captured_stderr():
+                    libsumo.start(self.cmd)
                 self.ts = libsumo
         except Exception as exc:  # libsumo raises its own exception types
-            msg = str(exc).strip().splitlines()
+            lines = [x.strip() for x in str(exc).splitlines() if x.strip()]
+            errors = [x for x in captured_lines() if x.startswith("Error:")]
+            detail = " ".join(x.removeprefix("Error:").strip() for x in errors) or " ".join(lines)
             raise SumoStartError(
-                f"SUMO failed to start: {msg[-1] if msg else type(exc).__name__}"
+                f"SUMO failed to start: {detail or type(exc).__name__}"
             ) from None
 
     def close(self) -> None:

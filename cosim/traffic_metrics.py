@@ -293,16 +293,13 @@ class TrafficRecorder:
             vals = [r[key] for r in rows]
             return float(np.nanmean(vals)) if vals else np.nan
 
+        total_k = float(np.nansum([r["edie_density_vpkm"] for r in rows])) if rows else 0.0
+        total_q = float(np.nansum([r["edie_flow_vph"] for r in rows])) if rows else 0.0
         out = {
             "edie_flow_vph": mean("edie_flow_vph"),
             "edie_density_vpkm": mean("edie_density_vpkm"),
-            "space_mean_speed_mps": (
-                float(np.nansum([r["edie_flow_vph"] for r in rows]))
-                / float(np.nansum([r["edie_density_vpkm"] for r in rows]))
-                / 3.6
-                if rows
-                else np.nan
-            ),
+            # q / k in (veh/h) / (veh/km) = km/h; undefined when nobody was in the zone.
+            "space_mean_speed_mps": total_q / total_k / 3.6 if total_k > 0 else np.nan,
             "boundary_vehicle_steps": self.boundary_vehicle_steps,
             "boundary_vehicle_steps_cav": self.boundary_vehicle_steps_cav,
             "boundary_vehicles": len(self._boundary_ids),

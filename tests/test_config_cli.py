@@ -148,11 +148,6 @@ def test_sumo_refusing_the_routes_is_one_line(tmp_path, cli_env, straight_net_xm
 
 
 @pytest.mark.sumo
-@pytest.mark.xfail(
-    strict=True,
-    reason="libsumo writes its own 'Error: ...' lines to stderr (fd 2) when it cannot load "
-    "the network, and SumoStartError then only says 'Process Error'",
-)
 def test_sumo_refusing_the_network_is_one_line(tmp_path, cli_env, straight_net_xml):
     """Junction elements removed: sumolib reads the file, SUMO refuses it
     ("Unknown from-node 'start' for edge 'main'")."""
@@ -162,11 +157,6 @@ def test_sumo_refusing_the_network_is_one_line(tmp_path, cli_env, straight_net_x
     assert_one_error_line(proc, "start")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="a lane speed of 0 gives speed_limit_mps = 0 and write_routes divides by it: "
-    "ZeroDivisionError traceback (cosim/demand.py _open_stream speedFactor)",
-)
 def test_zero_lane_speed_network_is_one_line(tmp_path, cli_env, straight_net_xml):
     text = straight_net_xml.replace('speed="40.00"', 'speed="0.00"')
     toml = _file_scenario(tmp_path, "zero.net.xml", text)
@@ -175,11 +165,6 @@ def test_zero_lane_speed_network_is_one_line(tmp_path, cli_env, straight_net_xml
 
 
 @pytest.mark.sumo
-@pytest.mark.xfail(
-    strict=True,
-    reason="TrafficRecorder.summary raises ZeroDivisionError when the zone saw no vehicle, "
-    "and the runner reports it as 'SUMO failed during the run: float division by zero'",
-)
 def test_scenario_without_traffic_runs(tmp_path, cli_env):
     (tmp_path / "s.toml").write_text(TINY.replace("inflow_vph = 1800.0", "inflow_vph = 0.0"))
     proc = cosim("run", "s.toml", "--quiet", "--out", tmp_path / "out", cwd=tmp_path,
@@ -189,12 +174,6 @@ def test_scenario_without_traffic_runs(tmp_path, cli_env):
 
 
 @pytest.mark.sumo
-@pytest.mark.xfail(
-    strict=True,
-    reason="the measurement zone is not checked against the road length: zone_start_m = "
-    "500 on a 300 m road runs and fails late with 'SUMO failed during the run: float "
-    "division by zero' instead of a config error naming outputs.zone_start_m",
-)
 def test_measurement_zone_beyond_the_road_is_a_config_error(tmp_path, cli_env):
     (tmp_path / "s.toml").write_text(TINY + "\n[outputs]\nzone_start_m = 500.0\n")
     proc = cosim("run", "s.toml", "--quiet", "--out", tmp_path / "out", cwd=tmp_path,

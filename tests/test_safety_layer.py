@@ -194,12 +194,6 @@ def test_side_rule_ignores_vehicles_far_ahead():
     assert layer.counts.side == 0
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="controllers/safety.py rule 2 bounds each CAV's next d by the neighbour's "
-    "CURRENT d; two CAVs moving towards each other both take the whole free room, so "
-    "the clearance drops to 0.15 m < 0.3 m",
-)
 def test_two_cavs_moving_towards_each_other_keep_the_side_clearance():
     """CAVs side by side, 0.45 m apart, both pushing towards each other at 1.5 m/s."""
     layer = SafetyLayer(SafetyConfig())

@@ -138,11 +138,6 @@ def test_sumo_start_failure_is_one_line_sumo_start_error(world_case):
     assert r["message"].startswith("SUMO failed to start")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="SumoWorld.start keeps only the last line of libsumo's message "
-    "('The route can not be build.') and drops the line naming the unknown edge",
-)
 def test_sumo_start_error_names_the_unknown_edge(world_case):
     assert "no_such_edge" in world_case("start_error")["message"]
 

@@ -237,11 +237,6 @@ def test_geometric_collision_is_one_event_per_new_overlap_and_sumo_per_entry():
     assert (geo[0]["a"], geo[0]["b"]) == ("cav.a", "hdv.b")
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="TrafficRecorder.summary divides total flow by total density with Python "
-    "floats: ZeroDivisionError when no vehicle was in the zone (e.g. inflow 0)",
-)
 def test_summary_of_an_empty_zone_has_zero_flow_and_undefined_speed():
     rec = TrafficRecorder(DT, (100.0, 200.0), (150.0,), 10.0, 0.0)
     for k in range(1, 201):
