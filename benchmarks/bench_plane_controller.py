@@ -2,10 +2,11 @@
 
 Prints, for N = 100, 1 000, 10 000 and 100 000 agents at a fixed density, the
 controller's time per step, agent-steps per second and the tracemalloc peak of
-one step, for the dense reference neighbour search and the KD-tree, plus a
-PlaneWorld end-to-end figure (observation + controller + Euler step + leader,
-metrics and trajectory recording off). Then a profile of one step at
-N = 10 000 split into neighbour search, alpha pair math, scatter, walls, gamma.
+one step, for the dense reference neighbour search and the KD-tree, plus
+PlaneWorld end-to-end figures (observation + controller + Euler step + leader,
+metrics and trajectory recording off) without and with the controller's
+opt-in Verlet neighbour list. Then a profile of one controller step at
+N = 10 000 split into neighbour search, alpha pair math, walls, gamma.
 
 Scenario (fixed density): a jittered square lattice, spacing 5.7 m (0.95 d),
 on a patch about sqrt(N) x sqrt(N) agents of a road whose edges lie 2 m from
@@ -19,8 +20,10 @@ Usage:
                                                                    # N = 10 000 needs ~4.5 GiB)
     .venv/bin/python benchmarks/bench_plane_controller.py --quick  # N <= 1000, ~3 s
     ... --dense-max 1000   # skip the slow dense reference at N = 10 000
-    ... --proposed         # run with the patches proposed in benchmarks/README.md
-    ... --ab               # interleaved current-vs-proposed speed-ups at the profile N
+    ... --ab               # interleaved Verlet list off / on (plane world) at the profile N
+    ... --ab --baseline DIR  # also against an older copy of the controllers/ package, e.g.
+                             #   git archive <commit> controllers | tar -x -C /tmp/base
+                             #   ... --ab --baseline /tmp/base/controllers
 
 BLAS/OpenMP pools are forced to one thread before numpy is imported, so the
 numbers are single-core. Time per step is the median process CPU time over
@@ -44,21 +47,23 @@ for _var in (
 
 import argparse  # noqa: E402
 import gc  # noqa: E402
+import importlib  # noqa: E402
+import importlib.util  # noqa: E402
 import math  # noqa: E402
 import statistics  # noqa: E402
+import sys  # noqa: E402
 import time  # noqa: E402
 import tracemalloc  # noqa: E402
 from collections import defaultdict  # noqa: E402
 from collections.abc import Callable  # noqa: E402
 from contextlib import contextmanager  # noqa: E402
 from dataclasses import dataclass  # noqa: E402
+from pathlib import Path  # noqa: E402
+from types import SimpleNamespace  # noqa: E402
 
 import numpy as np  # noqa: E402
-from scipy.spatial import cKDTree  # noqa: E402
 
 import controllers.flocking as fl  # noqa: E402
-import controllers.neighbours as nb  # noqa: E402
-import controllers.olfati_saber as osb  # noqa: E402
 from controllers.flocking import OlfatiSaberController  # noqa: E402
 from controllers.observation import Observation  # noqa: E402
 from controllers.params import FlockingParams  # noqa: E402
@@ -72,12 +77,13 @@ EDGE_GAP_M = 2.0  # outer rows' side to road edge (< r_wall = 3.6 m)
 SIZES_M = (4.5, 1.8)  # length, width
 DT_S = 0.01  # s, as the seed scenarios (dt = 0.1 s is unstable with these gains)
 DENSE_BYTES_PER_N2 = 46.0  # measured tracemalloc peak of the dense search / N^2 (m = 2)
+VERLET_SKIN_M = 0.5  # skin of the plane/verlet rows (OlfatiSaberController(verlet_skin=...))
 
 
 # --------------------------------------------------------------------------- scenario
-def bench_params(method: str) -> FlockingParams:
+def bench_params(method: str, params_cls=FlockingParams):
     """Default gains; bounded (sigma_1) gamma so the flock keeps its density while timed."""
-    return FlockingParams(neighbour_search=method, gamma_position="sigma1")
+    return params_cls(neighbour_search=method, gamma_position="sigma1")
 
 
 @dataclass
@@ -92,9 +98,9 @@ class Scenario:
     def n(self) -> int:
         return len(self.q)
 
-    def observation(self) -> Observation:
+    def observation(self, obs_cls=Observation) -> Observation:
         n = self.n
-        return Observation(
+        return obs_cls(
             q=self.q,
             p=self.p,
             dt=DT_S,
@@ -134,167 +140,10 @@ def make_world(sc: Scenario, controller) -> PlaneWorld:
     )
 
 
-# --------------------------------------------------------------------------- proposed patches
-def proposed_neighbour_pairs_tree(x, radius, period=None):
-    """neighbours.neighbour_pairs_tree with ``balanced_tree=False`` (faster build)."""
-    n = len(x)
-    if n < 2:
-        return np.empty((0, 2), dtype=np.int64)
-    pts, boxsize = nb.tree_points(x, radius, period)
-    tree = cKDTree(pts, boxsize=boxsize, balanced_tree=False)
-    pairs = tree.query_pairs(np.nextafter(radius, 0.0), output_type="ndarray")
-    return pairs.astype(np.int64, copy=False)
-
-
-def proposed_neighbour_pairs(x, radius, period=None, method="auto"):
-    """neighbours.neighbour_pairs with one int64 key sort instead of np.lexsort (same result)."""
-    x = np.asarray(x, dtype=float)
-    n = len(x)
-    if method == "dense" or (method == "auto" and n <= nb.DENSE_MAX_N):
-        pairs = nb.neighbour_pairs_dense(x, radius, period)
-    elif method in ("kdtree", "auto"):
-        pairs = nb.neighbour_pairs_tree(x, radius, period)
-    else:
-        raise ValueError(f"neighbour search method must be dense, kdtree or auto, not {method!r}")
-    if len(pairs):
-        key = pairs[:, 0] * n + pairs[:, 1]  # i < j < n, so the key orders (i, j) lexicographically
-        key.sort()
-        pairs = np.empty((len(key), 2), dtype=np.int64)
-        np.divmod(key, n, out=(pairs[:, 0], pairs[:, 1]))
-    return pairs
-
-
-def proposed_alpha_term(self, obs, s):
-    """flocking.OlfatiSaberController.alpha_term, same law, fewer passes over the pairs."""
-    p = self.params
-    x = obs.q * s
-    period = None if obs.period_s is None else obs.period_s * s[0]
-    pairs = fl.neighbour_pairs(x, p.r, period, p.neighbour_search)
-    u, _ = alpha_pair_forces(self, obs, s, pairs)
-    return u, len(pairs)
-
-
-def alpha_pair_forces(self, obs, s, pairs):
-    """Alpha forces (N, m) of the given pairs and the adjacency a_ij per pair.
-
-    np.take instead of fancy row indexing (~9x faster gathers with numpy 2.x);
-    |z|^2 by column adds (np.sum over a length-2 axis is slow); one sqrt shared
-    by the sigma-norm and n_ij; rho_h evaluated once (it is both the bump of
-    phi_alpha and a_ij); scatter as bincount(i) - bincount(j) per axis
-    without concatenating. Pairs beyond r contribute exact zeros.
-    """
-    p = self.params
-    n, m = obs.q.shape
-    if len(pairs) == 0:
-        return np.zeros((n, m)), np.zeros(0)
-    i = np.ascontiguousarray(pairs[:, 0])
-    j = np.ascontiguousarray(pairs[:, 1])
-    z = obs.relative(np.take(obs.q, j, axis=0) - np.take(obs.q, i, axis=0)) * s
-    dp = np.take(obs.p, j, axis=0) - np.take(obs.p, i, axis=0)
-    sq = z[:, 0] * z[:, 0]
-    for k in range(1, m):
-        sq += z[:, k] * z[:, k]
-    root = np.sqrt(1.0 + p.epsilon * sq)
-    z_sigma = (root - 1.0) / p.epsilon
-    rho = osb.rho_h(z_sigma / self.r_alpha, p.h_alpha)  # a_ij and the bump of phi_alpha
-    w = (p.c1_alpha * rho * osb.phi(z_sigma - self.d_alpha, p.a, p.b)) / root
-    c2 = p.c2_alpha * rho
-    u = np.empty((n, m))
-    for k in range(m):
-        fk = (w * s[k]) * z[:, k] + c2 * dp[:, k]  # f_ij on i, -f_ij on j
-        u[:, k] = np.bincount(i, fk, minlength=n) - np.bincount(j, fk, minlength=n)
-    return u, rho
-
-
-def _sum_sq(z):
-    """``np.sum(z * z, axis=-1)`` for m <= 3 by column adds: same bits, ~5x faster."""
-    out = z[..., 0] * z[..., 0]
-    for k in range(1, z.shape[-1]):
-        out += z[..., k] * z[..., k]
-    return out
-
-
-def proposed_sigma_norm(z, epsilon, axis=-1):
-    z = np.asarray(z, dtype=float)
-    sq = _sum_sq(z) if axis in (-1, z.ndim - 1) else np.sum(z * z, axis=axis)
-    return (np.sqrt(1.0 + epsilon * sq) - 1.0) / epsilon
-
-
-def proposed_sigma_grad(z, epsilon):
-    z = np.asarray(z, dtype=float)
-    return z / np.sqrt(1.0 + epsilon * _sum_sq(z))[..., None]
-
-
-def proposed_sigma_1_vec(z):
-    z = np.asarray(z, dtype=float)
-    return z / np.sqrt(1.0 + _sum_sq(z))[..., None]
-
-
-VERLET_SKIN_M = 0.5  # Verlet-list skin (scaled metres)
-VERLET_STATS = {"steps": 0, "rebuilds": 0}
-
-
-def proposed_alpha_term_verlet(self, obs, s):
-    """alpha_term with a Verlet neighbour list (pairs within r + skin, reused).
-
-    The list stays valid while every agent's displacement since the rebuild,
-    minus the mean displacement, is below skin / 2: a common translation does
-    not change pair distances, so no pair can have come from beyond r + skin.
-    Pairs between r and r + skin give exact zeros (rho_h = 0). KD-tree only;
-    the dense reference path is untouched.
-    """
-    p = self.params
-    n, m = obs.q.shape
-    if p.neighbour_search == "dense" or (p.neighbour_search == "auto" and n <= nb.DENSE_MAX_N):
-        return proposed_alpha_term(self, obs, s)
-    x = obs.q * s
-    period = None if obs.period_s is None else obs.period_s * s[0]
-    cache = getattr(self, "_verlet", None)
-    valid = (
-        cache is not None
-        and cache["x"].shape == x.shape
-        and cache["period"] == period
-        and np.array_equal(cache["ids"], obs.ids)
-    )
-    if valid:
-        dx = x - cache["x"]
-        if period is not None:
-            dx[:, 0] = (dx[:, 0] + 0.5 * period) % period - 0.5 * period
-        dx -= dx.mean(axis=0)
-        valid = float(_sum_sq(dx).max()) <= (0.5 * VERLET_SKIN_M) ** 2
-    VERLET_STATS["steps"] += 1
-    if not valid:
-        VERLET_STATS["rebuilds"] += 1
-        pairs = fl.neighbour_pairs(x, p.r + VERLET_SKIN_M, period, p.neighbour_search)
-        cache = {"x": x.copy(), "period": period, "ids": np.array(obs.ids), "pairs": pairs}
-        self._verlet = cache
-    u, rho = alpha_pair_forces(self, obs, s, cache["pairs"])
-    return u, int(np.count_nonzero(rho))
-
-
-P_NEIGHBOURS = (
-    (nb, "neighbour_pairs_tree", proposed_neighbour_pairs_tree),
-    (nb, "neighbour_pairs", proposed_neighbour_pairs),
-    (fl, "neighbour_pairs", proposed_neighbour_pairs),
-)
-P_ALPHA = ((OlfatiSaberController, "alpha_term", proposed_alpha_term),)
-P_SUMSQ = tuple(
-    (mod, name, func)
-    for mod in (osb, fl)
-    for name, func in (
-        ("sigma_norm", proposed_sigma_norm),
-        ("sigma_grad", proposed_sigma_grad),
-        ("sigma_1_vec", proposed_sigma_1_vec),
-    )
-)
-PATCHES = P_NEIGHBOURS + P_ALPHA + P_SUMSQ
-P_VERLET = (
-    P_NEIGHBOURS + P_SUMSQ + ((OlfatiSaberController, "alpha_term", proposed_alpha_term_verlet),)
-)
-
-
+# --------------------------------------------------------------------------- helpers
 @contextmanager
 def patched(targets):
+    """Temporarily set attributes ``(obj, name, value)`` (profiler wrappers, baseline swaps)."""
     saved = [(obj, name, getattr(obj, name)) for obj, name, _ in targets]
     try:
         for obj, name, new in targets:
@@ -305,13 +154,34 @@ def patched(targets):
             setattr(obj, name, old)
 
 
+def load_baseline(pkg_dir: str) -> SimpleNamespace:
+    """Import another copy of the ``controllers`` package (e.g. an older commit) as
+    ``controllers_baseline``; returns its flocking, observation and params modules."""
+    init = Path(pkg_dir).resolve() / "__init__.py"
+    if not init.is_file():
+        raise SystemExit(f"--baseline: {init} not found (give the controllers/ directory)")
+    name = "controllers_baseline"
+    spec = importlib.util.spec_from_file_location(
+        name, init, submodule_search_locations=[str(init.parent)]
+    )
+    pkg = importlib.util.module_from_spec(spec)
+    sys.modules[name] = pkg
+    spec.loader.exec_module(pkg)
+    return SimpleNamespace(
+        path=str(init.parent),
+        flocking=importlib.import_module(f"{name}.flocking"),
+        observation=importlib.import_module(f"{name}.observation"),
+        params=importlib.import_module(f"{name}.params"),
+    )
+
+
 # --------------------------------------------------------------------------- measurement
 @dataclass
 class Row:
     n: int
     case: str
     pairs_per_agent: float
-    med_s: float  # median CPU time per step
+    med_s: float  # median CPU time per step (mean for plane/verlet, see world_row)
     min_s: float  # fastest step (CPU)
     wall_s: float  # median wall time per step
     reps: int
@@ -328,12 +198,12 @@ class Timing:
     wall: list[float]
     peak_bytes: int
 
-    def row(self, n: int, case: str, pairs_per_agent: float) -> Row:
+    def row(self, n: int, case: str, pairs_per_agent: float, mean: bool = False) -> Row:
         return Row(
             n,
             case,
             pairs_per_agent,
-            statistics.median(self.cpu),
+            statistics.fmean(self.cpu) if mean else statistics.median(self.cpu),
             min(self.cpu),
             statistics.median(self.wall),
             len(self.cpu),
@@ -341,14 +211,17 @@ class Timing:
         )
 
 
-def measure(step: Callable[[], object], budget_s: float, max_reps: int = 2000) -> Timing:
+def measure(
+    step: Callable[[], object], budget_s: float, max_reps: int = 2000, min_timed: int = 0
+) -> Timing:
     """CPU and wall times per call of ``step`` and the tracemalloc peak of one call.
 
     CPU time (``time.process_time``; one thread) is what the table reports: on
     a shared machine it is far less noisy than wall time. The first call is
     traced (peak of what it allocates); if it is slow (more than half the
-    budget) it is also the only timing, else untraced calls are timed until
-    the budget (wall seconds) is spent, at least 3.
+    budget) and ``min_timed`` is 0 it is also the only timing, else untraced
+    calls are timed until the budget (wall seconds) is spent, at least
+    ``max(3, min_timed)``.
     """
     gc.collect()
     tracemalloc.start()
@@ -357,12 +230,13 @@ def measure(step: Callable[[], object], budget_s: float, max_reps: int = 2000) -
     cpu, wall = time.process_time() - c0, time.perf_counter() - w0
     peak = tracemalloc.get_traced_memory()[1]
     tracemalloc.stop()
-    if wall > 0.5 * budget_s:
+    if wall > 0.5 * budget_s and not min_timed:
         return Timing([cpu], [wall], peak)
     cpus: list[float] = []
     walls: list[float] = []
     deadline = time.perf_counter() + budget_s
-    while len(cpus) < max_reps and (len(cpus) < 3 or time.perf_counter() < deadline):
+    least = max(3, min_timed)
+    while len(cpus) < max_reps and (len(cpus) < least or time.perf_counter() < deadline):
         w0, c0 = time.perf_counter(), time.process_time()
         step()
         cpus.append(time.process_time() - c0)
@@ -378,12 +252,25 @@ def controller_row(sc: Scenario, method: str, budget_s: float) -> Row:
     return measure(lambda: ctrl.compute(obs), budget_s).row(sc.n, f"ctrl/{method}", pairs)
 
 
-def world_row(sc: Scenario, budget_s: float) -> Row:
-    ctrl = OlfatiSaberController(bench_params("kdtree"))
+def world_row(sc: Scenario, budget_s: float, verlet_skin: float = 0.0) -> tuple[Row, float]:
+    """Plane-world row and the fraction of timed steps that rebuilt the Verlet list.
+
+    With a Verlet list the step times are bimodal (rebuild or reuse), so the
+    row's time is the mean over at least 8 timed steps, not the median; the
+    traced (memory) step is forced to rebuild and is not timed.
+    """
+    ctrl = OlfatiSaberController(bench_params("kdtree"), verlet_skin=verlet_skin)
     world = make_world(sc, ctrl)
     world.step()  # step 0 computes the flock metrics once; later steps do not
-    timing = measure(world.step, budget_s)
-    return timing.row(sc.n, "plane/kdtree", ctrl.last_terms.n_pairs / sc.n)
+    if verlet_skin:
+        ctrl._verlet = None  # the traced step rebuilds the list: its peak memory
+    stats0 = dict(ctrl.verlet_stats)
+    timing = measure(world.step, budget_s, min_timed=8 if verlet_skin else 0)
+    steps = ctrl.verlet_stats["steps"] - stats0["steps"] - 1  # timed steps
+    rebuilds = ctrl.verlet_stats["rebuilds"] - stats0["rebuilds"] - 1
+    case = "plane/verlet" if verlet_skin else "plane/kdtree"
+    row = timing.row(sc.n, case, ctrl.last_terms.n_pairs / sc.n, mean=bool(verlet_skin))
+    return row, (rebuilds / steps if verlet_skin and steps > 0 else float("nan"))
 
 
 def print_table(rows: list[Row], skipped: list[str]) -> None:
@@ -431,20 +318,22 @@ class _Profiler:
         return wrapper
 
 
-_MODULE_FUNCS = (
+_MODULE_FUNCS = (  # names looked up in controllers.flocking's namespace
     "neighbour_pairs",
     "cross_pairs",
     "scatter_add",
     "sigma_norm",
     "sigma_grad",
-    "phi_alpha",
     "phi_beta",
     "adjacency",
     "sigma_1_vec",
+    "rho_h",
+    "phi",
 )
 _METHODS = (
     "compute",
     "alpha_term",
+    "_alpha_pair_forces",
     "circle_term",
     "vehicle_term",
     "wall_term",
@@ -452,7 +341,7 @@ _METHODS = (
     "_beta_pair",
     "gamma_term",
 )
-_KERNELS = {"sigma_norm", "sigma_grad", "phi_alpha", "adjacency"}
+_KERNELS = {"rho_h", "phi"}
 
 
 def _category(path: str) -> str:
@@ -460,11 +349,9 @@ def _category(path: str) -> str:
     if "neighbour_pairs" in parts:
         return "neighbour search (KD-tree + pair sort)"
     if "alpha_term" in parts:
-        if parts[-1] == "scatter_add":
-            return "alpha scatter (concat + bincount)"
         if parts[-1] in _KERNELS:
-            return "alpha pair math: sigma/phi/rho kernels"
-        return "alpha pair math: gathers, products"
+            return "alpha pair math: rho_h / phi kernels"
+        return "alpha pair math: gathers, sqrt, products, scatter"
     if "wall_term" in parts:
         return "walls / road edges"
     if "gamma_term" in parts:
@@ -498,7 +385,7 @@ def profile(sc: Scenario, steps: int) -> None:
         f"(wrapped calls; total {1e3 * total:.2f} ms/step):"
     )
     for name, t in sorted(cats.items(), key=lambda kv: -kv[1]):
-        print(f"  {name:<44} {1e3 * t:8.3f} ms  {100 * t / total:5.1f} %")
+        print(f"  {name:<50} {1e3 * t:8.3f} ms  {100 * t / total:5.1f} %")
     print("  by call path (exclusive time):")
     for path, t in sorted(prof.excl.items(), key=lambda kv: -kv[1]):
         if t / steps >= 0.005 * total:
@@ -506,9 +393,9 @@ def profile(sc: Scenario, steps: int) -> None:
 
 
 # --------------------------------------------------------------------------- A/B
-def _world_run(sc: Scenario, steps: int):
+def _world_run(sc: Scenario, controller, steps: int):
     """CPU seconds per step of ``steps`` plane-world steps, and the final positions."""
-    world = make_world(sc, OlfatiSaberController(bench_params("kdtree")))
+    world = make_world(sc, controller)
     world.step()  # step 0: flock metrics, not timed
     gc.collect()
     c0 = time.process_time()
@@ -517,55 +404,90 @@ def _world_run(sc: Scenario, steps: int):
     return (time.process_time() - c0) / steps, world.q
 
 
-def ab_compare(sc: Scenario, rounds: int, budget_s: float, world_steps: int) -> None:
-    """Interleaved current-vs-proposed timing; speed-ups are medians of per-round ratios."""
+def ab_compare(sc: Scenario, rounds: int, budget_s: float, world_steps: int, base=None) -> None:
+    """Interleaved timings; speed-ups are medians of per-round ratios to the first variant.
+
+    Variants: the library's controller, its Verlet list (plane world), and with
+    ``base`` (see :func:`load_baseline`) the baseline package's controller, fed
+    its own Observation class (and its ``check_finite`` inside the world).
+    """
     obs = sc.observation()
     ctrl = OlfatiSaberController(bench_params("kdtree"))
     u_cur = ctrl.compute(obs).copy()
-    with patched(PATCHES):
-        u_new = ctrl.compute(obs).copy()
-    err = float(np.max(np.abs(u_new - u_cur)) / max(np.max(np.abs(u_cur)), 1e-300))
-    variants = {
-        "current": (),
-        "P1 neighbours": P_NEIGHBOURS,
-        "P2 alpha_term": P_ALPHA,
-        "P3 sum of sq.": P_SUMSQ,
-        "P1+P2+P3": PATCHES,
-    }
-    worlds = {"current": (), "P1+P2+P3": PATCHES, "P1..P3 + Verlet": P_VERLET}
+    ctrl_variants: dict[str, tuple[Callable[[], object], tuple]] = {}
+    world_variants: dict[str, tuple[Callable[[], object], tuple]] = {}
+    err = None
+    if base is not None:
+        b_obs = sc.observation(base.observation.Observation)
+        b_ctrl = base.flocking.OlfatiSaberController(
+            bench_params("kdtree", base.params.FlockingParams)
+        )
+        u_base = b_ctrl.compute(b_obs).copy()
+        err = float(np.max(np.abs(u_cur - u_base)) / max(np.max(np.abs(u_base)), 1e-300))
+        ctrl_variants["baseline"] = (lambda: b_ctrl.compute(b_obs), ())
+        world_variants["baseline"] = (
+            lambda: base.flocking.OlfatiSaberController(
+                bench_params("kdtree", base.params.FlockingParams)
+            ),
+            ((Observation, "check_finite", base.observation.Observation.check_finite),),
+        )
+    ctrl_variants["library"] = (lambda: ctrl.compute(obs), ())
+    world_variants["library kdtree"] = (
+        lambda: OlfatiSaberController(bench_params("kdtree")),
+        (),
+    )
+    verlet_ctrls: list[OlfatiSaberController] = []
+
+    def make_verlet():
+        verlet_ctrls.append(
+            OlfatiSaberController(bench_params("kdtree"), verlet_skin=VERLET_SKIN_M)
+        )
+        return verlet_ctrls[-1]
+
+    world_variants["library + Verlet"] = (make_verlet, ())
     ctrl_t: dict[str, list[float]] = defaultdict(list)
     world_t: dict[str, list[float]] = defaultdict(list)
     q_end: dict[str, np.ndarray] = {}
     for _ in range(rounds):
-        for name, patches in variants.items():
+        for name, (call, patches) in ctrl_variants.items():
             with patched(patches):
-                cpu = measure(lambda: ctrl.compute(obs), budget_s).cpu
-            ctrl_t[name].append(statistics.median(cpu))
-        for name, patches in worlds.items():
+                ctrl_t[name].append(statistics.median(measure(call, budget_s).cpu))
+        for name, (factory, patches) in world_variants.items():
             with patched(patches):
-                t, q_end[name] = _world_run(sc, world_steps)
+                t, q_end[name] = _world_run(sc, factory(), world_steps)
             world_t[name].append(t)
+    steps = sum(c.verlet_stats["steps"] for c in verlet_ctrls)
+    rebuilds = sum(c.verlet_stats["rebuilds"] for c in verlet_ctrls)
+    dq_verlet = float(np.max(np.abs(q_end["library + Verlet"] - q_end["library kdtree"])))
     print(
         f"\nA/B at N = {sc.n}, CPU time, {rounds} interleaved rounds "
-        f"(speed-up = median over rounds of current / variant):"
+        f"(speed-up = median over rounds of first variant / variant):"
     )
-    print(f"  controller, same observation (P1+P2+P3 max|du|/max|u| = {err:.1e}):")
-    for table, label in ((ctrl_t, "ctrl"), (world_t, "world")):
-        if label == "world":
-            dq = float(np.max(np.abs(q_end["P1..P3 + Verlet"] - q_end["current"])))
-            rate = VERLET_STATS["rebuilds"] / max(VERLET_STATS["steps"], 1)
-            print(
-                f"  plane world, {world_steps} steps after step 0 (Verlet skin {VERLET_SKIN_M} m: "
-                f"{100 * rate:.0f} % of steps rebuild; max |dq| vs current {dq:.1e} m):"
-            )
-        base = table["current"]
-        for name, vals in table.items():
-            ratio = statistics.median(b / v for b, v in zip(base, vals, strict=True))
-            t = statistics.median(vals)
-            print(
-                f"    {name:<16} {1e3 * t:8.3f} ms/step  {sc.n / t:11.3e} agent-steps/s"
-                f"  speed-up x{ratio:4.2f}"
-            )
+    note = "" if err is None else f" (library vs baseline max|du|/max|u| = {err:.1e})"
+    print(f"  controller, same observation{note}:")
+    _print_ab(sc.n, ctrl_t)
+    note = f"max|dq| Verlet vs kdtree {dq_verlet:.1e} m"
+    if base is not None:
+        dq_base = float(np.max(np.abs(q_end["library kdtree"] - q_end["baseline"])))
+        note += f", library vs baseline {dq_base:.1e} m"
+    print(
+        f"  plane world, {world_steps} steps after step 0 (Verlet skin {VERLET_SKIN_M} m: "
+        f"{100 * rebuilds / max(steps, 1):.0f} % of steps rebuild; {note}):"
+    )
+    _print_ab(sc.n, world_t)
+    if base is not None:
+        print(f"  (baseline: {base.path})")
+
+
+def _print_ab(n: int, table: dict[str, list[float]]) -> None:
+    ref = next(iter(table.values()))
+    for name, vals in table.items():
+        ratio = statistics.median(b / v for b, v in zip(ref, vals, strict=True))
+        t = statistics.median(vals)
+        print(
+            f"    {name:<18} {1e3 * t:8.3f} ms/step  {n / t:11.3e} agent-steps/s"
+            f"  speed-up x{ratio:4.2f}"
+        )
 
 
 # --------------------------------------------------------------------------- main
@@ -581,16 +503,22 @@ def main(argv: list[str] | None = None) -> None:
     )
     ap.add_argument("--budget", type=float, help="seconds of timed steps per case")
     ap.add_argument("--profile-n", type=int, help="N of the profile (default 10000; quick 1000)")
-    ap.add_argument("--proposed", action="store_true", help="apply the proposed patches")
-    ap.add_argument("--ab", action="store_true", help="current vs proposed, interleaved")
+    ap.add_argument("--ab", action="store_true", help="interleaved A/B: Verlet list off/on")
+    ap.add_argument(
+        "--baseline",
+        metavar="DIR",
+        help="with --ab: also time the controllers/ package copy in DIR (e.g. an older commit)",
+    )
     args = ap.parse_args(argv)
+    if args.baseline and not args.ab:
+        ap.error("--baseline needs --ab")
     sizes = args.sizes or ([100, 1000] if args.quick else [100, 1000, 10_000, 100_000])
     budget = args.budget or (0.15 if args.quick else 0.6)
     profile_n = args.profile_n or (1000 if args.quick else 10_000)
 
     print(
         f"numpy {np.__version__}, threads forced to 1 (OMP/OPENBLAS/MKL_NUM_THREADS=1); "
-        f"{'PROPOSED patches applied' if args.proposed else 'current code'}"
+        f"library code from {Path(fl.__file__).parent}"
     )
     print(
         f"fixed density: lattice {SPACING_M} m +- {JITTER_M} m, road edges {EDGE_GAP_M} m from "
@@ -598,56 +526,67 @@ def main(argv: list[str] | None = None) -> None:
     )
     rows: list[Row] = []
     skipped: list[str] = []
-    with patched(PATCHES if args.proposed else ()):
-        for n in sizes:
-            sc = make_scenario(n)
-            for method in ("dense", "kdtree"):
-                if method == "dense" and n > args.dense_max:
-                    gib = DENSE_BYTES_PER_N2 * n * n / 2**30
-                    skipped.append(
-                        f"{n:>7} ctrl/dense     skipped: N x N arrays need ~{gib:.0f} GiB "
-                        f"(> --dense-max {args.dense_max})"
-                    )
-                    continue
-                rows.append(controller_row(sc, method, budget))
-            rows.append(world_row(sc, budget))
-        print_table(rows, skipped)
-        print(
-            "(ms/step = median CPU time, min = fastest step; reps 1 = one traced step only;\n"
-            " peak = tracemalloc peak of one step (numpy buffers; cKDTree's C++ node arrays,"
-            " O(N), are not traced))"
-        )
+    rebuild: dict[int, float] = {}
+    for n in sizes:
+        sc = make_scenario(n)
+        for method in ("dense", "kdtree"):
+            if method == "dense" and n > args.dense_max:
+                gib = DENSE_BYTES_PER_N2 * n * n / 2**30
+                skipped.append(
+                    f"{n:>7} ctrl/dense     skipped: N x N arrays need ~{gib:.0f} GiB "
+                    f"(> --dense-max {args.dense_max})"
+                )
+                continue
+            rows.append(controller_row(sc, method, budget))
+        rows.append(world_row(sc, budget)[0])
+        row, rebuild[n] = world_row(sc, budget, VERLET_SKIN_M)
+        rows.append(row)
+    print_table(rows, skipped)
+    print(
+        "(ms/step = median CPU time, min = fastest step; reps 1 = one traced step only;\n"
+        " peak = tracemalloc peak of one step (numpy buffers; cKDTree's C++ node arrays,"
+        " O(N), are not traced);\n"
+        f" plane/verlet: verlet_skin = {VERLET_SKIN_M} m, ms/step is the MEAN over the timed"
+        " steps, rebuilds included; its peak is that of a rebuild step)"
+    )
+    print(
+        "plane/verlet steps that rebuilt the list: "
+        + ", ".join(f"N={n}: {100 * f:.0f} %" for n, f in rebuild.items())
+    )
 
-        by = {(r.n, r.case): r for r in rows}
-        for n in sizes:
-            if (n, "ctrl/dense") in by:
-                ratio = by[n, "ctrl/dense"].med_s / by[n, "ctrl/kdtree"].med_s
-                print(f"N = {n:>6}: kdtree is x{ratio:.1f} faster than dense")
-        kd = [by[n, "ctrl/kdtree"] for n in sizes]
-        if len(kd) > 1:
-            per = [r.peak_bytes / r.n for r in kd]
-            print(
-                "memory per agent (kdtree), bytes: "
-                + ", ".join(f"N={r.n}: {b:.0f}" for r, b in zip(kd, per, strict=True))
-                + f"  (max/min {max(per) / min(per):.2f}: linear in N)"
-            )
-        if (10_000, "ctrl/kdtree") in by:
-            r = by[10_000, "ctrl/kdtree"]
+    by = {(r.n, r.case): r for r in rows}
+    for n in sizes:
+        if (n, "ctrl/dense") in by:
+            ratio = by[n, "ctrl/dense"].med_s / by[n, "ctrl/kdtree"].med_s
+            print(f"N = {n:>6}: kdtree is x{ratio:.1f} faster than dense")
+    kd = [by[n, "ctrl/kdtree"] for n in sizes]
+    if len(kd) > 1:
+        per = [r.peak_bytes / r.n for r in kd]
+        print(
+            "memory per agent (kdtree), bytes: "
+            + ", ".join(f"N={r.n}: {b:.0f}" for r, b in zip(kd, per, strict=True))
+            + f"  (max/min {max(per) / min(per):.2f}: linear in N)"
+        )
+    for case in ("ctrl/kdtree", "plane/kdtree", "plane/verlet"):
+        if (10_000, case) in by:
+            r = by[10_000, case]
             best = r.n / r.min_s
             ok = "MET" if r.rate >= 1e6 else ("met by best step only" if best >= 1e6 else "NOT MET")
             print(
-                f"target 1e6 agent-steps/s at N = 10000 (controller, one core): {ok} "
-                f"(median {r.rate:.3e}, best {best:.3e})"
+                f"target 1e6 agent-steps/s at N = 10000, {case:<12} (one core): {ok:<7} "
+                f"({'mean' if case == 'plane/verlet' else 'median'} {r.rate:.3e}, "
+                f"best step {best:.3e})"
             )
 
-        if profile_n:
-            profile(make_scenario(profile_n), steps=10 if profile_n >= 10_000 else 50)
+    if profile_n:
+        profile(make_scenario(profile_n), steps=10 if profile_n >= 10_000 else 50)
     if args.ab:
         ab_compare(
             make_scenario(profile_n),
             rounds=5,
             budget_s=0.5 * budget,
             world_steps=40 if profile_n >= 10_000 else 100,
+            base=load_baseline(args.baseline) if args.baseline else None,
         )
 
 

@@ -38,12 +38,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .neighbours import cross_pairs, neighbour_pairs, scatter_add
+from .neighbours import DENSE_MAX_N, cross_pairs, neighbour_pairs, scatter_add
 from .observation import Observation
 from .olfati_saber import (
+    _sum_sq,
     adjacency,
-    phi_alpha,
+    phi,
     phi_beta,
+    rho_h,
     sigma_1_vec,
     sigma_grad,
     sigma_norm,
@@ -74,11 +76,25 @@ class OlfatiSaberController:
 
     ``compute(obs)`` returns ``u`` (N, m) in m/s^2; ``last_terms`` keeps the
     split into alpha, beta, wall and gamma parts of the last call.
+
+    ``verlet_skin`` (scaled m, default 0 = off) turns on a Verlet neighbour
+    list for the KD-tree search of the alpha term: pairs within ``r + skin``
+    are kept and reused while no agent has moved more than ``skin / 2``
+    relative to the flock's mean displacement. The forces are the same as
+    without it (pairs between ``r`` and ``r + skin`` add exact zeros); the
+    list is keyed by the agents' ids, N, m, the period and the radius, and
+    rebuilt whenever any of them changes, so one controller may serve any
+    sequence of observations.
     """
 
     name = "olfati_saber"
 
-    def __init__(self, params: FlockingParams | None = None) -> None:
+    def __init__(self, params: FlockingParams | None = None, verlet_skin: float = 0.0) -> None:
+        if not (np.isfinite(verlet_skin) and verlet_skin >= 0.0):
+            raise ValueError(f"verlet_skin must be finite and >= 0, got {verlet_skin!r}")
+        self.verlet_skin = float(verlet_skin)
+        self.verlet_stats = {"steps": 0, "rebuilds": 0}
+        self._verlet: dict | None = None
         self.params = params or FlockingParams()
         p = self.params
         eps = p.epsilon
@@ -125,25 +141,94 @@ class OlfatiSaberController:
 
     # ------------------------------------------------------------------
     def alpha_term(self, obs: Observation, s: np.ndarray) -> tuple[np.ndarray, int]:
-        """``c1 sum phi_alpha(||q_ij||_sigma) S n_ij + c2 sum a_ij (p_j - p_i)`` (OS06 eq. 23)."""
+        """``c1 sum phi_alpha(||q_ij||_sigma) S n_ij + c2 sum a_ij (p_j - p_i)`` (OS06 eq. 23).
+
+        Returns the term (N, m) and the number of neighbour pairs (scaled
+        distance below ``r``).
+        """
         p = self.params
-        n, m = obs.q.shape
         x = obs.q * s
         period = None if obs.period_s is None else obs.period_s * s[0]
+        n = len(x)
+        tree = p.neighbour_search == "kdtree" or (p.neighbour_search == "auto" and n > DENSE_MAX_N)
+        if self.verlet_skin > 0.0 and n > 1 and tree:
+            pairs = self._verlet_pairs(obs, x, period)  # within r + skin: a superset
+            u, sq = self._alpha_pair_forces(obs, s, pairs)
+            return u, int(np.count_nonzero(sq < p.r * p.r))
         pairs = neighbour_pairs(x, p.r, period, p.neighbour_search)
-        if len(pairs) == 0:
-            return np.zeros((n, m)), 0
-        i, j = pairs[:, 0], pairs[:, 1]
-        z = obs.relative(obs.q[j] - obs.q[i]) * s
-        z_sigma = sigma_norm(z, p.epsilon)
-        grad = phi_alpha(z_sigma, self.r_alpha, self.d_alpha, p.h_alpha, p.a, p.b)[:, None] * (
-            sigma_grad(z, p.epsilon) * s
-        )
-        a_ij = adjacency(z_sigma, self.r_alpha, p.h_alpha)[:, None]
-        f = p.c1_alpha * grad + p.c2_alpha * a_ij * (obs.p[j] - obs.p[i])
-        # f acts on i, -f on j (antisymmetric pair terms).
-        u = scatter_add(n, np.concatenate([i, j]), np.concatenate([f, -f]))
+        u, _ = self._alpha_pair_forces(obs, s, pairs)
         return u, len(pairs)
+
+    def _alpha_pair_forces(
+        self, obs: Observation, s: np.ndarray, pairs: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Alpha term (N, m) of the pairs (P, 2), ``i < j``, and ``||z_ij||^2`` (P,), scaled m^2.
+
+        Per pair, with ``z = S (q_j - q_i)`` (wrapped on a ring) and
+        ``root = sqrt(1 + eps ||z||^2)``: ``||z||_sigma = (root - 1) / eps``
+        (OS06 eq. 8), ``n_ij = z / root`` (eq. 23, 9), ``a_ij = rho_h(||z||_sigma /
+        r_alpha)`` (eq. 11), ``phi_alpha = a_ij phi(||z||_sigma - d_alpha)``
+        (eq. 15), and ``f_ij = c1 phi_alpha S n_ij + c2 a_ij (p_j - p_i)`` acts on
+        i, ``-f_ij`` on j (antisymmetric pair terms). One sqrt and one rho_h
+        serve both uses; pairs at scaled distance >= r add exact zeros.
+        """
+        p = self.params
+        n, m = obs.q.shape
+        if len(pairs) == 0:
+            return np.zeros((n, m)), np.zeros(0)
+        i = np.ascontiguousarray(pairs[:, 0])
+        j = np.ascontiguousarray(pairs[:, 1])
+        # np.take: row gathers several times faster than fancy indexing q[j].
+        z = obs.relative(np.take(obs.q, j, axis=0) - np.take(obs.q, i, axis=0)) * s
+        dp = np.take(obs.p, j, axis=0) - np.take(obs.p, i, axis=0)
+        sq = _sum_sq(z)
+        root = np.sqrt(1.0 + p.epsilon * sq)
+        z_sigma = (root - 1.0) / p.epsilon
+        a_ij = rho_h(z_sigma / self.r_alpha, p.h_alpha)
+        w = (p.c1_alpha * a_ij * phi(z_sigma - self.d_alpha, p.a, p.b)) / root
+        c2a = p.c2_alpha * a_ij
+        u = np.empty((n, m))
+        for k in range(m):
+            f_k = (w * s[k]) * z[:, k] + c2a * dp[:, k]
+            u[:, k] = np.bincount(i, f_k, minlength=n) - np.bincount(j, f_k, minlength=n)
+        return u, sq
+
+    def _verlet_pairs(self, obs: Observation, x: np.ndarray, period: float | None):
+        """Pairs within ``r + verlet_skin`` of the last rebuild, rebuilt when they may miss one.
+
+        ``x`` (N, m) scaled positions, ``period`` scaled ring length or None. A
+        common translation does not change pair distances, so while every
+        agent's displacement since the rebuild minus the mean displacement is
+        below ``skin / 2`` (with a 1e-6 relative margin for rounding), no pair
+        can have come from beyond ``r + skin`` to within ``r``.
+        """
+        radius = self.params.r + self.verlet_skin
+        c = self._verlet
+        self.verlet_stats["steps"] += 1
+        if (
+            c is not None
+            and c["x"].shape == x.shape
+            and c["period"] == period
+            and c["radius"] == radius
+            and np.array_equal(c["ids"], obs.ids)
+        ):
+            dx = x - c["x"]
+            if period is not None:
+                dx[:, 0] = (dx[:, 0] + 0.5 * period) % period - 0.5 * period
+            dx -= dx.mean(axis=0)
+            limit = (0.5 * self.verlet_skin * (1.0 - 1e-6)) ** 2
+            if float(_sum_sq(dx).max()) <= limit:
+                return c["pairs"]
+        self.verlet_stats["rebuilds"] += 1
+        pairs = neighbour_pairs(x, radius, period, self.params.neighbour_search)
+        self._verlet = {
+            "x": x.copy(),
+            "period": period,
+            "radius": radius,
+            "ids": np.array(obs.ids, copy=True),
+            "pairs": pairs,
+        }
+        return pairs
 
     def _beta_pair(self, dq_hat, dp_hat, d_sigma, c1, c2, s=None):
         """One beta interaction per row: ``c1 phi_beta n_hat + c2 b_ik (p_hat - p_i)``.

@@ -48,7 +48,9 @@ def neighbour_pairs_tree(
     if n < 2:
         return np.empty((0, 2), dtype=np.int64)
     pts, boxsize = tree_points(x, radius, period)
-    tree = cKDTree(pts, boxsize=boxsize)
+    # balanced_tree=False: sliding-midpoint splits instead of medians, a faster build
+    # (the query is exact either way, so the pairs are the same).
+    tree = cKDTree(pts, boxsize=boxsize, balanced_tree=False)
     # query_pairs uses <= r; shrink by one ulp-ish factor to match the strict "<".
     pairs = tree.query_pairs(np.nextafter(radius, 0.0), output_type="ndarray")
     return pairs.astype(np.int64, copy=False)
@@ -80,15 +82,20 @@ def neighbour_pairs(
     so that both methods return identical arrays.
     """
     x = np.asarray(x, dtype=float)
-    if method == "dense" or (method == "auto" and len(x) <= DENSE_MAX_N):
+    n = len(x)
+    if method == "dense" or (method == "auto" and n <= DENSE_MAX_N):
         pairs = neighbour_pairs_dense(x, radius, period)
     elif method in ("kdtree", "auto"):
         pairs = neighbour_pairs_tree(x, radius, period)
     else:
         raise ValueError(f"neighbour search method must be dense, kdtree or auto, not {method!r}")
     if len(pairs):
-        order = np.lexsort((pairs[:, 1], pairs[:, 0]))
-        pairs = pairs[order]
+        # One int64 key per pair: i < j < n, so i * n + j orders the pairs as
+        # np.lexsort((j, i)) does, with one sort of one array (several times faster).
+        key = pairs[:, 0] * n + pairs[:, 1]
+        key.sort()
+        pairs = np.empty((len(key), 2), dtype=np.int64)
+        np.divmod(key, n, out=(pairs[:, 0], pairs[:, 1]))
     return pairs
 
 

@@ -167,6 +167,8 @@ class Observation:
 
     def check_finite(self) -> None:
         """Raise :class:`InvalidStateError` naming the first agent with a NaN/inf state."""
+        if np.isfinite(self.q).all() and np.isfinite(self.p).all():
+            return  # fast path: no per-row reduction when all is finite
         bad = ~(np.isfinite(self.q).all(axis=1) & np.isfinite(self.p).all(axis=1))
         if bad.any():
             i = int(np.flatnonzero(bad)[0])

@@ -81,17 +81,28 @@ class ControllerSpec:
             (SUMO's own SL2015 model also for CAVs: a baseline).
         params: FlockingParams fields (table [controller.params]).
         lateral_damping: gain pulling the lateral speed to zero, 1/s.
+        time_gap_s: time gap T of the reference speed ``min(v_des, (g - s0)/T)``
+            (controllers/road_reference.py), s; 0 tracks the desired speed only.
+        standstill_gap_m: standstill gap s0 of that policy, m.
+        lateral_margin_m: extra lateral width within which a vehicle ahead
+            counts as the leader for the time-gap policy, m.
     """
 
     kind: str = "flocking"
     params: dict = field(default_factory=dict)
     lateral_damping: float = 1.0
+    time_gap_s: float = 0.8
+    standstill_gap_m: float = 2.0
+    lateral_margin_m: float = 0.3
 
     def __post_init__(self) -> None:
         if self.kind not in CONTROLLER_KINDS:
             raise ConfigError(
                 f"controller.kind must be one of {', '.join(CONTROLLER_KINDS)}, got {self.kind!r}"
             )
+        for name in ("time_gap_s", "standstill_gap_m", "lateral_margin_m"):
+            if getattr(self, name) < 0:
+                raise ConfigError(f"controller.{name} must be >= 0, got {getattr(self, name)}")
         if self.lateral_damping < 0:
             raise ConfigError(
                 f"controller.lateral_damping must be >= 0, got {self.lateral_damping}"

@@ -21,6 +21,7 @@ import pandas as pd
 from controllers.constraints import AccelerationBox, ConstrainedController, JerkLimit
 from controllers.flocking import OlfatiSaberController
 from controllers.observation import Observation
+from controllers.road_reference import leader_gaps, time_gap_speed
 from controllers.safety import RoadState, SafetyConfig, SafetyLayer
 
 from . import __version__
@@ -367,7 +368,15 @@ def _control_step(sc, net, world, controller, safety, va, cav_rows, idx_main, ed
     p = np.column_stack([va.v[cav_rows], va.v_lat[cav_rows]])
     edges = _edges_ahead(net, q[:, 0], p[:, 0], period)
     leader_p = np.zeros_like(p)
-    leader_p[:, 0] = [v_des.get(i, v_cap) for i in ids]
+    desired = np.array([v_des.get(i, v_cap) for i in ids])
+    ctl = sc.controller
+    if ctl.time_gap_s > 0:
+        gap = leader_gaps(va.s[idx_main], va.d[idx_main], va.length[idx_main],
+                          va.width[idx_main], pos_in_main,
+                          reach_m=ctl.standstill_gap_m + ctl.time_gap_s * v_cap + 10.0,
+                          period=period, lateral_margin_m=ctl.lateral_margin_m)
+        desired = time_gap_speed(desired, gap, ctl.time_gap_s, ctl.standstill_gap_m)
+    leader_p[:, 0] = desired
     obs = Observation(
         q=q, p=p, t=world.time, dt=dt, ids=np.array(ids, dtype=object),
         length=va.length[cav_rows], width=va.width[cav_rows],

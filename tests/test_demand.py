@@ -333,3 +333,30 @@ def test_bad_detector_period(straight: RoadNetwork, tmp_path: Path) -> None:
         write_detectors(straight, [50.0], tmp_path / "d.add.xml", 0.0, tmp_path)
     with pytest.raises(ConfigError, match="outside the road"):
         write_detectors(straight, [500.0], tmp_path / "d.add.xml", 10.0, tmp_path)
+
+
+def test_slot_insertion_keeps_headway_and_never_departs_faster_than_the_slot_leader(tmp_path):
+    """Slot insertion: in each lateral slot, departures are at least slot_headway_s apart,
+    the follower's depart speed is at most its slot leader's, and the gap at departure is
+    at least s0 + v * 1 s."""
+    import xml.etree.ElementTree as ET
+
+    from cosim.demand import MIN_GAP_M, DemandSpec, write_routes
+    from cosim.network_build import NetworkSpec, build_network
+
+    net = build_network(NetworkSpec(kind="straight", length_m=300.0), cache_dir=tmp_path)
+    demand = DemandSpec(inflow_vph=12000.0, duration_s=120.0, cav_share=1.0)
+    info = write_routes(net, demand, 7, tmp_path / "r.rou.xml")
+    root = ET.parse(info.path).getroot()
+    lengths = {v.get("id"): float(v.get("length")) for v in root.iter("vType")}
+    by_slot: dict = {}
+    for v in root.iter("vehicle"):
+        by_slot.setdefault(v.get("departPosLat"), []).append(
+            (float(v.get("depart")), float(v.get("departSpeed")), lengths[v.get("type")])
+        )
+    assert len(by_slot) == 4  # 10.2 m road, slots 2.55 m apart
+    for rows in by_slot.values():
+        for (t0, v0, l0), (t1, v1, _) in zip(rows, rows[1:], strict=False):
+            assert t1 - t0 >= demand.slot_headway_s - 0.011
+            assert v1 <= v0 + 1e-3
+            assert v0 * (t1 - t0) - l0 >= MIN_GAP_M + v1 * 1.0 - 0.35  # depart times rounded
