@@ -1,4 +1,4 @@
-"""Command line: ``cosim run [FILE|NAME]``, ``cosim list``, ``cosim plane NAME``.
+"""Command line: ``cosim run``, ``cosim list``, ``cosim plane``, ``cosim sweep``, ``cosim analyse``.
 
 Every user error (bad config, missing network, SUMO failing) prints one line
 ``error: ...`` on stderr and exits with status 2; no traceback.
@@ -12,7 +12,9 @@ import sys
 from datetime import datetime
 from pathlib import Path
 
+from .analysis import add_analyse_parser
 from .errors import CosimError
+from .sweep import add_sweep_parser
 
 SCENARIO_DIR = Path(__file__).resolve().parents[1] / "experiments" / "scenarios"
 
@@ -156,6 +158,8 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--out")
     pl.add_argument("--plot", action="store_true", help="write PNG figures")
     pl.set_defaults(func=cmd_plane)
+    add_sweep_parser(sub)
+    add_analyse_parser(sub)
     return ap
 
 

@@ -122,7 +122,6 @@ def run_scenario(
     args = [
         "-r", str(routes.path),
         "--step-length", str(run.step_length_s),
-        "--lateral-resolution", str(run.lateral_resolution_m),
         "--collision.action", "warn",
         "--collision.mingap-factor", "0",
         "--seed", str(run.seed),
@@ -132,6 +131,8 @@ def run_scenario(
         "--no-warnings", "true",
         "--duration-log.disable", "true",
     ]
+    if net.n_lanes <= 1:  # sublane model only on lane-free roads; LC2013 refuses it
+        args += ["--lateral-resolution", str(run.lateral_resolution_m)]
     detectors = None
     if sc.outputs.sumo_detectors:
         detectors = write_detectors(

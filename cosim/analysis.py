@@ -1,0 +1,605 @@
+"""Analyse a sweep's results: fundamental diagrams, capacity, safety, boundary, flock tables.
+
+Input: a sweep output directory (``results.csv``, ``sweep.json``, ``runs/<run_id>/``; see
+:mod:`cosim.sweep`). Only ``ok`` runs enter the statistics; failed runs are listed.
+
+A **series** is one curve of the fundamental diagram: a CAV share and a controller
+(``demand.cav_share``, ``controller.kind``), plus the variant and any other swept
+parameter except the demand level and the seed. The **demand level** is the swept
+``demand.inflow_vph`` (open roads, veh/h) or ``demand.ring_density_vpkm`` (rings, veh/km).
+
+Tables (CSV and Markdown, in ``RESULTS_DIR/analysis/``):
+
+* ``fd_runs``: one point per run: Edie flow (veh/h), density (veh/km), space-mean speed
+  (m/s) over the measurement period (the run's summary row);
+* ``fd_intervals``: one point per measurement interval of every run (its intervals.csv);
+* ``fd_summary``: per series and demand level, the mean over seeds with a t-based
+  confidence interval (``*_ci``: half-width);
+* ``capacity``: per series, the maximum sustained flow: for each seed the maximum over
+  demand levels of the run's mean Edie flow (mean over the measurement intervals after
+  warm-up), then the mean over seeds with a t-based confidence interval
+  (``capacity_ci_low/high_vph``); ``at_grid_edge`` is true when that maximum is reached
+  at the highest demand tested (the capacity may be higher);
+* ``safety``: collisions (sum over seeds), minimum gaps and side clearances (minimum),
+  time headways, safety-layer activations, per series and demand level;
+* ``boundary``: boundary violations (vehicle-steps, vehicles, worst excursion, share);
+* ``flock``: flock metrics (minimum CAV distance, velocity alignment, connectivity) and
+  controller clip rates;
+* ``failed``: failed runs and their reasons.
+
+``report.md`` collects them; figures go to ``analysis/figures/`` (:mod:`cosim.figures`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # numpy and pandas are imported where used: `cosim --help` stays fast
+    import pandas as pd
+
+from .errors import ConfigError, CosimError
+
+DEMAND_COLUMNS = ("demand.inflow_vph", "demand.ring_density_vpkm")
+#: Always part of a series (the brief: one curve per CAV share and controller).
+CORE_SERIES = ("demand.cav_share", "controller.kind")
+FD_COLUMNS = ("edie_density_vpkm", "edie_flow_vph", "space_mean_speed_mps")
+
+SAFETY_AGG = (
+    ("collisions_sumo_cav", "sum"),
+    ("collisions_geometric_cav", "sum"),
+    ("collisions_sumo_hdv_only", "sum"),
+    ("collisions_geometric_hdv_only", "sum"),
+    ("teleports", "sum"),
+    ("min_gap_m", "min"),
+    ("min_cav_gap_m", "min"),
+    ("min_side_clearance_m", "min"),
+    ("median_time_headway_s", "mean"),
+    ("p05_time_headway_s", "min"),
+    ("safety_speed_activations", "sum"),
+    ("safety_side_activations", "sum"),
+    ("safety_edge_activations", "sum"),
+    ("vehicle_steps", "sum"),
+)
+BOUNDARY_AGG = (
+    ("boundary_vehicle_steps", "sum"),
+    ("boundary_vehicle_steps_cav", "sum"),
+    ("boundary_vehicles", "sum"),
+    ("worst_boundary_excursion_m", "max"),
+    ("vehicle_steps", "sum"),
+)
+FLOCK_AGG = (
+    ("flock_min_agent_distance_m", "min"),
+    ("flock_velocity_alignment", "mean"),
+    ("flock_largest_component_share", "mean"),
+)
+
+
+# --------------------------------------------------------------------------------------
+# Loading
+# --------------------------------------------------------------------------------------
+
+
+@dataclass
+class SweepResults:
+    """A sweep's results table with what the analysis needs to group it."""
+    root: Path
+    table: pd.DataFrame
+    plan: dict = field(default_factory=dict)
+    demand_col: str | None = None
+    series_cols: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> pd.DataFrame:
+        return self.table[self.table["status"] == "ok"].copy()
+
+    @property
+    def failed(self) -> pd.DataFrame:
+        return self.table[self.table["status"] != "ok"].copy()
+
+    def run_dir(self, run_id: str) -> Path:
+        return self.root / "runs" / str(run_id)
+
+
+def load_results(path: str | Path) -> SweepResults:
+    """Load ``results.csv`` (a sweep directory or the CSV itself) and ``sweep.json``."""
+    import pandas as pd
+
+    path = Path(path)
+    csv = path if path.suffix == ".csv" else path / "results.csv"
+    if not csv.is_file():
+        raise ConfigError(f"no results table at {csv} (run 'cosim sweep' first)")
+    try:
+        table = pd.read_csv(csv)
+    except (pd.errors.EmptyDataError, pd.errors.ParserError) as exc:
+        raise ConfigError(f"{csv}: unreadable results table: {exc}") from None
+    for col in ("run_id", "status"):
+        if col not in table:
+            raise ConfigError(f"{csv}: not a sweep results table (no column {col!r})")
+    root = csv.parent
+    plan = {}
+    if (root / "sweep.json").is_file():
+        try:
+            plan = json.loads((root / "sweep.json").read_text())
+        except ValueError:
+            plan = {}
+    demand = demand_column(table, plan)
+    return SweepResults(root, table, plan, demand, series_columns(table, plan, demand))
+
+
+def demand_column(table: pd.DataFrame, plan: dict | None = None) -> str | None:
+    """The demand level column: the sweep's demand axis, else the one that varies."""
+    plan = plan or {}
+    if plan.get("demand_axis") in table:
+        return plan["demand_axis"]
+    for col in DEMAND_COLUMNS:
+        if col in table and table[col].nunique(dropna=True) > 1:
+            return col
+    for col in DEMAND_COLUMNS:
+        if col in table and table[col].notna().any():
+            return col
+    return None
+
+
+def series_columns(
+    table: pd.DataFrame, plan: dict | None = None, demand: str | None = None
+) -> list[str]:
+    """Columns that tell the curves apart: variant, CAV share, controller, other axes
+    (those that vary; with variants, not those a variant fixes)."""
+
+    plan = plan or {}
+    candidates = ["variant"] + list(CORE_SERIES)
+    candidates += list(plan.get("axes", {}))
+    candidates += [c for v in plan.get("variants", []) for c in v if c != "name"]
+    candidates += [c for c in table.columns if "." in c]  # parameter columns
+    out = []
+    for c in dict.fromkeys(candidates):
+        if c not in table or c == demand or c in DEMAND_COLUMNS or c == "scenario.seed":
+            continue
+        varies = table[c].nunique(dropna=False) > 1
+        if c in CORE_SERIES or varies:
+            out.append(c)
+    if "variant" in out:  # drop parameters a variant fixes (e.g. its network.kind)
+        by_variant = table.groupby("variant", dropna=False)
+        out = [c for c in out if c == "variant" or c in CORE_SERIES
+               or by_variant[c].nunique(dropna=False).max() > 1]
+    return out
+
+
+# --------------------------------------------------------------------------------------
+# Statistics
+# --------------------------------------------------------------------------------------
+
+
+def t_interval(values: Sequence[float], confidence: float = 0.95) -> tuple[float, float, int]:
+    """Mean, t-based confidence half-width (NaN for fewer than 2 values) and count."""
+    import numpy as np
+    from scipy import stats
+
+    x = np.asarray([v for v in values if v is not None and np.isfinite(v)], dtype=float)
+    n = len(x)
+    if n == 0:
+        return math.nan, math.nan, 0
+    mean = float(x.mean())
+    if n < 2:
+        return mean, math.nan, n
+    sd = float(x.std(ddof=1))
+    half = float(stats.t.ppf(0.5 + confidence / 2.0, n - 1) * sd / math.sqrt(n))
+    return mean, half, n
+
+
+def _group(df: pd.DataFrame, keys: list[str]):
+    return df.groupby(keys, dropna=False, sort=True) if keys else [((), df)]
+
+
+def _key_dict(keys: list[str], key) -> dict:
+    if not isinstance(key, tuple):
+        key = (key,)
+    return dict(zip(keys, key, strict=True))
+
+
+def fd_runs(res: SweepResults) -> pd.DataFrame:
+    """One fundamental-diagram point per ok run (its summary row)."""
+    ok = res.ok
+    cols = ["run_id", *res.series_cols]
+    if res.demand_col:
+        cols.append(res.demand_col)
+    cols += [c for c in ("seed", *FD_COLUMNS) if c in ok]
+    return ok[cols].reset_index(drop=True)
+
+
+def fd_intervals(res: SweepResults) -> pd.DataFrame:
+    """Every measurement interval of every ok run (its intervals.csv), with the run's keys."""
+    import pandas as pd
+
+    frames = []
+    keys = ["run_id", *res.series_cols] + ([res.demand_col] if res.demand_col else [])
+    keys += ["seed"] if "seed" in res.table else []
+    for _, row in res.ok.iterrows():
+        path = res.run_dir(row["run_id"]) / "intervals.csv"
+        if not path.is_file():
+            continue
+        try:
+            iv = pd.read_csv(path)
+        except pd.errors.EmptyDataError:
+            continue
+        if iv.empty:
+            continue
+        for k in reversed(keys):
+            iv.insert(0, k, row[k])
+        frames.append(iv)
+    if not frames:
+        return pd.DataFrame(columns=keys + ["t_start_s", "t_end_s", *FD_COLUMNS])
+    return pd.concat(frames, ignore_index=True)
+
+
+def fd_summary(res: SweepResults, confidence: float = 0.95) -> pd.DataFrame:
+    """Per series and demand level: mean density, flow and speed over seeds, with CIs."""
+    import pandas as pd
+
+    keys = res.series_cols + ([res.demand_col] if res.demand_col else [])
+    rows = []
+    for key, g in _group(res.ok, keys):
+        row = _key_dict(keys, key)
+        row["n_runs"] = len(g)
+        for col in FD_COLUMNS:
+            if col in g:
+                mean, half, _ = t_interval(g[col], confidence)
+                row[col] = mean
+                row[f"{col}_ci"] = half
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def capacity_table(res: SweepResults, confidence: float = 0.95) -> pd.DataFrame:
+    """Maximum sustained flow per series, with a t-based CI across seeds.
+
+    For each seed: the maximum over demand levels of the run's mean Edie flow (veh/h).
+    Columns: ``capacity_vph`` (mean over seeds), ``capacity_ci_low_vph``,
+    ``capacity_ci_high_vph``, ``capacity_sd_vph``, ``n_seeds``, ``demand_at_max``
+    (median over seeds of the demand level giving the maximum),
+    ``density_at_max_vpkm``, ``speed_at_max_mps`` (means over seeds),
+    ``capacity_of_mean_curve_vph`` (maximum over demand levels of the seed-mean flow),
+    ``n_demand_levels``, ``at_grid_edge``.
+    """
+    import numpy as np
+    import pandas as pd
+
+    ok = res.ok
+    demand = res.demand_col
+    if ok.empty or "edie_flow_vph" not in ok:
+        return pd.DataFrame()
+    keys = res.series_cols
+    rows = []
+    for key, g in _group(ok, keys):
+        g = g[np.isfinite(g["edie_flow_vph"].astype(float))]
+        if g.empty:
+            continue
+        row = _key_dict(keys, key)
+        by_seed = g.groupby("seed") if "seed" in g else [(0, g)]
+        peaks = []
+        for _, gs in by_seed:
+            peaks.append(gs.loc[gs["edie_flow_vph"].idxmax()])
+        peaks = pd.DataFrame(peaks)
+        mean, half, n = t_interval(peaks["edie_flow_vph"], confidence)
+        row.update(
+            capacity_vph=mean,
+            capacity_ci_low_vph=mean - half if n > 1 else math.nan,
+            capacity_ci_high_vph=mean + half if n > 1 else math.nan,
+            capacity_sd_vph=float(peaks["edie_flow_vph"].std(ddof=1)) if n > 1 else math.nan,
+            n_seeds=n,
+        )
+        if "edie_density_vpkm" in peaks:
+            row["density_at_max_vpkm"] = float(peaks["edie_density_vpkm"].mean())
+        if "space_mean_speed_mps" in peaks:
+            row["speed_at_max_mps"] = float(peaks["space_mean_speed_mps"].mean())
+        if demand:
+            levels = np.sort(g[demand].dropna().unique())
+            row["demand_at_max"] = float(peaks[demand].median())
+            curve = g.groupby(demand)["edie_flow_vph"].mean()
+            row["capacity_of_mean_curve_vph"] = float(curve.max())
+            row["n_demand_levels"] = len(levels)
+            row["at_grid_edge"] = bool(len(levels) > 1 and curve.idxmax() == levels[-1])
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _aggregate(res: SweepResults, spec, extra_prefix: str | None = None) -> pd.DataFrame:
+    import pandas as pd
+
+    ok = res.ok
+    keys = res.series_cols + ([res.demand_col] if res.demand_col else [])
+    spec = [(c, a) for c, a in spec if c in ok]
+    if extra_prefix:
+        spec += [(c, "mean") for c in ok.columns if c.startswith(extra_prefix)]
+    rows = []
+    for key, g in _group(ok, keys):
+        row = _key_dict(keys, key)
+        row["n_runs"] = len(g)
+        for col, agg in spec:
+            vals = pd.to_numeric(g[col], errors="coerce")
+            row[f"{col}_{agg}"] = getattr(vals, agg)() if vals.notna().any() else math.nan
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def safety_table(res: SweepResults) -> pd.DataFrame:
+    """Collisions (sums over seeds), minimum gaps and clearances, headways, per series x demand.
+
+    ``collisions_cav_per_1e6_vehicle_steps`` = (SUMO-reported collisions involving a CAV)
+    per million vehicle-steps in the measurement zone.
+    """
+    import numpy as np
+
+    df = _aggregate(res, SAFETY_AGG)
+    if {"collisions_sumo_cav_sum", "vehicle_steps_sum"} <= set(df.columns):
+        steps = df["vehicle_steps_sum"].replace(0, np.nan)
+        df["collisions_cav_per_1e6_vehicle_steps"] = df["collisions_sumo_cav_sum"] / steps * 1e6
+    return df
+
+
+def boundary_table(res: SweepResults) -> pd.DataFrame:
+    """Boundary violations per series x demand; ``boundary_share`` = violating vehicle-steps
+    / vehicle-steps."""
+    import numpy as np
+
+    df = _aggregate(res, BOUNDARY_AGG)
+    if {"boundary_vehicle_steps_sum", "vehicle_steps_sum"} <= set(df.columns):
+        df["boundary_share"] = df["boundary_vehicle_steps_sum"] / df["vehicle_steps_sum"].replace(
+            0, np.nan
+        )
+    return df
+
+
+def flock_table(res: SweepResults) -> pd.DataFrame:
+    """Flock metrics and controller clip rates (mean over seeds) per series x demand."""
+    return _aggregate(res, FLOCK_AGG, extra_prefix="clip_rate_")
+
+
+def failures_table(res: SweepResults) -> pd.DataFrame:
+    cols = [c for c in ("run_id", "variant", *res.series_cols, res.demand_col, "seed", "error")
+            if c and c in res.table]
+    return res.failed[list(dict.fromkeys(cols))].reset_index(drop=True)
+
+
+# --------------------------------------------------------------------------------------
+# Output
+# --------------------------------------------------------------------------------------
+
+
+def _md_cell(v) -> str:
+    import numpy as np
+
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return ""
+    if isinstance(v, bool | np.bool_):
+        return "yes" if v else "no"
+    if isinstance(v, float | np.floating):
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        if float(v).is_integer() and abs(v) < 1e15:
+            return f"{int(v)}"
+        if abs(v) >= 1000:
+            return f"{v:.0f}"
+        return f"{v:.4g}"
+    return str(v).replace("|", "\\|").replace("\n", " ")
+
+
+def markdown_table(df: pd.DataFrame) -> str:
+    """A GitHub-flavoured Markdown table (numbers to 4 significant digits)."""
+    if df.empty:
+        return "(no rows)\n"
+    header = "| " + " | ".join(str(c) for c in df.columns) + " |"
+    sep = "|" + "|".join("---" for _ in df.columns) + "|"
+    body = ["| " + " | ".join(_md_cell(v) for v in row) + " |" for row in df.itertuples(False)]
+    return "\n".join([header, sep, *body]) + "\n"
+
+
+@dataclass
+class Analysis:
+    """Tables by name and the files written."""
+    tables: dict[str, pd.DataFrame]
+    files: list[Path]
+    out_dir: Path
+
+
+TABLE_TITLES = {
+    "capacity": "Capacity (maximum sustained flow)",
+    "fd_summary": "Fundamental diagram (mean over seeds)",
+    "safety": "Safety",
+    "boundary": "Boundary violations",
+    "flock": "Flock metrics",
+    "failed": "Failed runs",
+}
+
+
+def analyse(
+    results_dir: str | Path,
+    out_dir: str | Path | None = None,
+    figures: bool = True,
+    confidence: float = 0.95,
+    runs: Sequence[str] | None = None,
+    max_run_figures: int = 2,
+    times: Sequence[float] | None = None,
+) -> Analysis:
+    """Compute every table, write CSV + Markdown + report.md (and figures) to ``out_dir``.
+
+    Args:
+        results_dir: the sweep output directory.
+        out_dir: default ``results_dir/analysis``.
+        figures: also write PNG figures (fundamental diagram, capacity, and per run a
+            time-space diagram and a top view when it has trajectories.csv).
+        confidence: level of the t-based confidence intervals.
+        runs: run ids to draw run figures for (default: the first ``max_run_figures``
+            ok runs that have trajectories).
+        times: instants of the top views, s (default: 3 spread over the run).
+    """
+    if not 0 < confidence < 1:
+        raise ConfigError(f"confidence must be in (0, 1), got {confidence}")
+    res = load_results(results_dir)
+    out = Path(out_dir) if out_dir else res.root / "analysis"
+    out.mkdir(parents=True, exist_ok=True)
+    tables = {
+        "fd_runs": fd_runs(res),
+        "fd_intervals": fd_intervals(res),
+        "fd_summary": fd_summary(res, confidence),
+        "capacity": capacity_table(res, confidence),
+        "safety": safety_table(res),
+        "boundary": boundary_table(res),
+        "flock": flock_table(res),
+        "failed": failures_table(res),
+    }
+    files: list[Path] = []
+    for name, df in tables.items():
+        p = out / f"{name}.csv"
+        df.to_csv(p, index=False)
+        files.append(p)
+        if name in TABLE_TITLES:
+            p = out / f"{name}.md"
+            p.write_text(f"## {TABLE_TITLES[name]}\n\n" + markdown_table(df))
+            files.append(p)
+
+    fig_files: list[Path] = []
+    if figures:
+        fig_files = _figures(res, tables, out / "figures", runs, max_run_figures, times)
+        files += fig_files
+    report = out / "report.md"
+    report.write_text(_report(res, tables, confidence, fig_files, out))
+    files.append(report)
+    return Analysis(tables, files, out)
+
+
+def _figures(res, tables, fig_dir: Path, runs, max_run_figures, times) -> list[Path]:
+    from . import figures as fg
+
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    made = []
+    if not tables["fd_runs"].empty:
+        made.append(fg.plot_fundamental_diagram(
+            tables["fd_runs"], fig_dir / "fundamental_diagram.png", res.series_cols,
+            demand_col=res.demand_col, intervals=tables["fd_intervals"],
+            title=res.plan.get("name"),
+        ))
+    if not tables["capacity"].empty and "demand.cav_share" in tables["capacity"]:
+        made.append(fg.plot_capacity(tables["capacity"], fig_dir / "capacity.png",
+                                     res.series_cols, title=res.plan.get("name")))
+    if runs is None:
+        runs = [r for r in res.ok["run_id"]
+                if (res.run_dir(r) / "trajectories.csv").is_file()][:max_run_figures]
+    for rid in runs:
+        rdir = res.run_dir(rid)
+        if not (rdir / "trajectories.csv").is_file():
+            raise ConfigError(f"run {rid}: no trajectories.csv in {rdir} "
+                              "(set [outputs] trajectories = true)")
+        made += fg.plot_run(rdir, fig_dir, times=times, prefix=f"{rid}_")
+    return made
+
+
+def _report(res: SweepResults, tables, confidence, fig_files, out: Path) -> str:
+    plan = res.plan
+    n_ok, n_all = len(res.ok), len(res.table)
+    lines = [f"# Sweep analysis: {plan.get('name', res.root.name)}", ""]
+    if plan.get("description"):
+        lines += [plan["description"], ""]
+    lines += [
+        f"- runs: {n_all} in results.csv, {n_ok} ok, {n_all - n_ok} failed"
+        + (f" (grid: {plan['n_points']} points)" if "n_points" in plan else ""),
+        f"- series (one curve each): {', '.join(res.series_cols) or '-'}",
+        f"- demand level: {res.demand_col or '-'}",
+        f"- confidence intervals: t-based, {confidence:.0%}, across seeds",
+    ]
+    for col in ("cosim_version", "sumo_version"):
+        if col in res.table:
+            vals = ", ".join(str(v) for v in res.table[col].dropna().unique())
+            lines.append(f"- {col.replace('_', ' ')}: {vals}")
+    lines.append("")
+    for name in ("capacity", "fd_summary", "safety", "boundary", "flock", "failed"):
+        if name == "failed" and tables[name].empty:
+            continue
+        lines += [f"## {TABLE_TITLES[name]}", "", markdown_table(tables[name])]
+    if fig_files:
+        lines += ["## Figures", ""]
+        lines += [f"![{p.stem}]({p.relative_to(out)})" for p in fig_files]
+        lines.append("")
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------------------
+# Command line
+# --------------------------------------------------------------------------------------
+
+
+def _add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("results_dir",
+                   help="sweep output folder (with results.csv), or one run's folder")
+    p.add_argument("--out", help="where to write tables and figures (default RESULTS_DIR/analysis)")
+    p.add_argument("--no-figures", action="store_true", help="tables only")
+    p.add_argument("--run", action="append", metavar="RUN_ID",
+                   help="draw the time-space diagram and top view of this run (repeatable)")
+    p.add_argument("--times", type=float, nargs="+", metavar="T",
+                   help="top views at these times, s (default: 3 spread over the run)")
+    p.add_argument("--confidence", type=float, default=0.95, help="CI level (default 0.95)")
+    p.set_defaults(func=cmd_analyse)
+
+
+def add_analyse_parser(subparsers) -> argparse.ArgumentParser:
+    """Register ``cosim analyse`` on an argparse subparsers object; returns the subparser."""
+    p = subparsers.add_parser(
+        "analyse", help="tables and figures from a sweep's results (or one run's outputs)",
+        description="Fundamental diagrams, capacity, safety, boundary and flock tables "
+                    "(CSV + Markdown) and PNG figures from a sweep output folder.",
+    )
+    _add_arguments(p)
+    return p
+
+
+def cmd_analyse(ns: argparse.Namespace) -> int:
+    root = Path(ns.results_dir)
+    if not root.exists():
+        raise ConfigError(f"no such folder: {root}")
+    if root.is_dir() and not (root / "results.csv").is_file() and (root / "summary.csv").is_file():
+        from .figures import plot_run  # a single run's folder (cosim run --out ...)
+
+        out = Path(ns.out) if ns.out else root / "analysis"
+        if not (root / "trajectories.csv").is_file():
+            raise ConfigError(f"{root}: no trajectories.csv to draw "
+                              "(run with [outputs] trajectories = true)")
+        for p in plot_run(root, out, times=ns.times):
+            print(f"figure: {p}")
+        return 0
+    a = analyse(root, ns.out, figures=not ns.no_figures, confidence=ns.confidence,
+                runs=ns.run, times=ns.times)
+    cap = a.tables["capacity"]
+    if not cap.empty:
+        cols = [c for c in (*load_results(root).series_cols, "capacity_vph",
+                            "capacity_ci_low_vph", "capacity_ci_high_vph", "n_seeds",
+                            "at_grid_edge") if c in cap]
+        shown = cap[cols].copy()
+        for c in ("capacity_vph", "capacity_ci_low_vph", "capacity_ci_high_vph"):
+            if c in shown:
+                shown[c] = shown[c].round().astype("Int64")
+        print("capacity (max over demand levels of the mean flow, veh/h):")
+        print(shown.to_string(index=False))
+    n_failed = len(a.tables["failed"])
+    if n_failed:
+        print(f"{n_failed} failed runs are listed in {a.out_dir / 'failed.csv'}")
+    print(f"tables and figures written to {a.out_dir}/ (report.md)")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``cosim analyse`` without the rest of the CLI: ``main(["RESULTS_DIR", ...])``."""
+    ap = argparse.ArgumentParser(prog="cosim analyse", description=__doc__.splitlines()[0])
+    _add_arguments(ap)
+    ns = ap.parse_args(argv)
+    try:
+        return ns.func(ns)
+    except CosimError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2

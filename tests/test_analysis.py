@@ -1,0 +1,236 @@
+"""Sweep analysis and figures on a synthetic sweep folder (no SUMO): capacity with a
+t-based confidence interval across seeds, fundamental-diagram tables, safety /
+boundary / flock aggregation, failed runs, Markdown, figures and the command line."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy import stats
+
+from cosim import analysis as an
+from cosim import figures as fg
+
+PNG = b"\x89PNG\r\n\x1a\n"
+DEMANDS = (1000.0, 2000.0, 3000.0)
+SEEDS = (1, 2, 3)
+
+
+def _flow(share: float, demand: float, seed: int) -> float:
+    """Share 0 peaks at 2000 veh/h (1800 + 10 seed); share 1 grows to the last level."""
+    if share == 0.0:
+        return {1000.0: 900.0, 2000.0: 1800.0, 3000.0: 1500.0}[demand] + 10.0 * seed
+    return 0.9 * demand + 5.0 * seed
+
+
+@pytest.fixture
+def sweep_dir(tmp_path):
+    rows = []
+    for share in (0.0, 1.0):
+        for demand in DEMANDS:
+            for seed in SEEDS:
+                rid = f"r{int(share)}{int(demand)}{seed}"
+                q = _flow(share, demand, seed)
+                v = 30.0 - demand / 1000.0
+                rows.append({
+                    "run_id": rid, "status": "ok", "error": "", "sweep": "synthetic",
+                    "demand.inflow_vph": demand, "demand.cav_share": share,
+                    "controller.kind": "flocking", "network.kind": "straight", "seed": seed,
+                    "cosim_version": "0.1.0", "sumo_version": "1.28.0",
+                    "edie_flow_vph": q, "edie_density_vpkm": q / (3.6 * v),
+                    "space_mean_speed_mps": v,
+                    "collisions_sumo_cav": int(share == 1.0 and demand == 3000.0),
+                    "collisions_geometric_cav": 0, "teleports": 0,
+                    "min_gap_m": 10.0 - demand / 1000.0 + seed, "min_side_clearance_m": 0.5,
+                    "median_time_headway_s": 1.0 + seed, "p05_time_headway_s": 0.5 * seed,
+                    "boundary_vehicle_steps": seed, "boundary_vehicle_steps_cav": 0,
+                    "boundary_vehicles": 1, "worst_boundary_excursion_m": 0.1 * seed,
+                    "vehicle_steps": 1000,
+                    "flock_min_agent_distance_m": 3.0 + seed if share else np.nan,
+                    "flock_velocity_alignment": 0.9 if share else np.nan,
+                    "clip_rate_acceleration_box": 0.01 * seed,
+                })
+                run = tmp_path / "runs" / rid
+                run.mkdir(parents=True)
+                pd.DataFrame({
+                    "t_start_s": [60.0, 120.0], "t_end_s": [120.0, 180.0],
+                    "edie_flow_vph": [q - 50, q + 50],
+                    "edie_density_vpkm": [q / (3.6 * v)] * 2,
+                    "space_mean_speed_mps": [v, v],
+                }).to_csv(run / "intervals.csv", index=False)
+    rows.append({"run_id": "bad", "status": "failed", "error": "SumoStartError: boom",
+                 "demand.inflow_vph": 3000.0, "demand.cav_share": 0.5,
+                 "controller.kind": "flocking", "network.kind": "straight", "seed": 1})
+    pd.DataFrame(rows).to_csv(tmp_path / "results.csv", index=False)
+    (tmp_path / "sweep.json").write_text(json.dumps({
+        "name": "synthetic", "axes": {"demand.inflow_vph": list(DEMANDS),
+                                      "demand.cav_share": [0.0, 1.0]},
+        "seeds": list(SEEDS), "variants": [], "demand_axis": "demand.inflow_vph",
+        "n_points": 19,
+    }))
+    _trajectory_run(tmp_path / "runs" / "r130001")
+    return tmp_path
+
+
+def _trajectory_run(run, period=None):
+    """12 vehicles, 50 steps of 0.2 s, on a 10.2 m road; half CAVs."""
+    rows = []
+    for k in range(12):
+        for j in range(50):
+            t = 0.2 * j
+            s = 20.0 * k + 25.0 * t
+            rows.append({"t_s": t, "id": f"v{k}", "s_m": s % period if period else s,
+                         "d_m": -3.4 + 3.4 * (k % 3), "v_mps": 25.0, "v_lat_mps": 0.0,
+                         "length_m": 4.5, "width_m": 1.8, "is_cav": k % 2 == 0})
+    pd.DataFrame(rows).to_csv(run / "trajectories.csv", index=False)
+    (run / "config.toml").write_text(
+        '[network]\nkind = "three_lane"\nwidth_m = 10.2\nlength_m = 600.0\n'
+    )
+
+
+# --------------------------------------------------------------------------------------
+
+
+def test_t_interval_is_the_student_t_half_width():
+    mean, half, n = an.t_interval([1.0, 2.0, 4.0, np.nan])
+    assert (mean, n) == (pytest.approx(7 / 3), 3)
+    sd = np.std([1.0, 2.0, 4.0], ddof=1)
+    assert half == pytest.approx(stats.t.ppf(0.975, 2) * sd / math.sqrt(3))
+    assert math.isnan(an.t_interval([5.0])[1])
+    assert an.t_interval([])[2] == 0
+
+
+def test_series_and_demand_columns(sweep_dir):
+    res = an.load_results(sweep_dir)
+    assert res.demand_col == "demand.inflow_vph"
+    assert res.series_cols == ["demand.cav_share", "controller.kind"]
+    assert len(res.ok) == 18 and len(res.failed) == 1
+
+
+def test_capacity_is_the_seed_mean_of_per_seed_maxima_with_a_t_interval(sweep_dir):
+    cap = an.capacity_table(an.load_results(sweep_dir)).set_index("demand.cav_share")
+    peaks0 = np.array([1810.0, 1820.0, 1830.0])  # share 0: at 2000 veh/h
+    half0 = stats.t.ppf(0.975, 2) * peaks0.std(ddof=1) / math.sqrt(3)
+    assert cap.loc[0.0, "capacity_vph"] == pytest.approx(1820.0)
+    assert cap.loc[0.0, "capacity_ci_low_vph"] == pytest.approx(1820.0 - half0)
+    assert cap.loc[0.0, "capacity_ci_high_vph"] == pytest.approx(1820.0 + half0)
+    assert cap.loc[0.0, "demand_at_max"] == 2000.0
+    assert not cap.loc[0.0, "at_grid_edge"]
+    assert cap.loc[1.0, "capacity_vph"] == pytest.approx(2700.0 + 10.0)
+    assert cap.loc[1.0, "at_grid_edge"]  # the maximum is at the highest demand tested
+    assert (cap["n_seeds"] == 3).all() and (cap["n_demand_levels"] == 3).all()
+    assert cap.loc[0.0, "capacity_of_mean_curve_vph"] == pytest.approx(1820.0)
+
+
+def test_fundamental_diagram_tables(sweep_dir):
+    res = an.load_results(sweep_dir)
+    runs = an.fd_runs(res)
+    assert len(runs) == 18 and "bad" not in set(runs["run_id"])
+    iv = an.fd_intervals(res)
+    assert len(iv) == 36
+    assert list(iv.columns[:5]) == ["run_id", "demand.cav_share", "controller.kind",
+                                    "demand.inflow_vph", "seed"]
+    summ = an.fd_summary(res).set_index(["demand.cav_share", "demand.inflow_vph"])
+    assert summ.loc[(0.0, 2000.0), "edie_flow_vph"] == pytest.approx(1820.0)
+    assert summ.loc[(0.0, 2000.0), "n_runs"] == 3
+    assert summ.loc[(0.0, 2000.0), "space_mean_speed_mps_ci"] == pytest.approx(0.0)
+
+
+def test_safety_boundary_and_flock_aggregate_over_seeds(sweep_dir):
+    res = an.load_results(sweep_dir)
+    s = an.safety_table(res).set_index(["demand.cav_share", "demand.inflow_vph"])
+    assert s.loc[(1.0, 3000.0), "collisions_sumo_cav_sum"] == 3
+    assert s.loc[(1.0, 3000.0), "collisions_cav_per_1e6_vehicle_steps"] == pytest.approx(1000.0)
+    assert s.loc[(0.0, 1000.0), "min_gap_m_min"] == pytest.approx(10.0)
+    assert s.loc[(0.0, 1000.0), "median_time_headway_s_mean"] == pytest.approx(3.0)
+    b = an.boundary_table(res).set_index(["demand.cav_share", "demand.inflow_vph"])
+    assert b.loc[(0.0, 1000.0), "boundary_vehicle_steps_sum"] == 6
+    assert b.loc[(0.0, 1000.0), "worst_boundary_excursion_m_max"] == pytest.approx(0.3)
+    assert b.loc[(0.0, 1000.0), "boundary_share"] == pytest.approx(6 / 3000)
+    f = an.flock_table(res).set_index(["demand.cav_share", "demand.inflow_vph"])
+    assert f.loc[(1.0, 1000.0), "flock_min_agent_distance_m_min"] == pytest.approx(4.0)
+    assert math.isnan(f.loc[(0.0, 1000.0), "flock_min_agent_distance_m_min"])
+    assert f.loc[(1.0, 1000.0), "clip_rate_acceleration_box_mean"] == pytest.approx(0.02)
+
+
+def test_markdown_table_formats_numbers_and_blanks():
+    df = pd.DataFrame({"a": [1.0, 2.5, np.inf], "b": ["x|y", None, "z"], "c": [True, False, True]})
+    md = an.markdown_table(df).splitlines()
+    assert md[0] == "| a | b | c |" and md[1] == "|---|---|---|"
+    assert md[2] == "| 1 | x\\|y | yes |"
+    assert md[3] == "| 2.5 |  | no |"
+    assert md[4].startswith("| inf |")
+    assert an.markdown_table(pd.DataFrame({"q": [12419.6]})).splitlines()[2] == "| 12420 |"
+
+
+def test_series_columns_with_variants_drop_what_the_variant_fixes():
+    table = pd.DataFrame({
+        "variant": ["a", "a", "b", "b"], "network.kind": ["straight"] * 2 + ["three_lane"] * 2,
+        "demand.cav_share": 0.0, "controller.kind": "sumo", "demand.inflow_vph": [1, 2, 1, 2],
+        "network.width_m": [10.2, 8.0, 10.2, 8.0],
+    })
+    cols = an.series_columns(table, {}, "demand.inflow_vph")
+    assert cols == ["variant", "demand.cav_share", "controller.kind", "network.width_m"]
+
+
+def test_analyse_writes_tables_report_and_figures(sweep_dir):
+    a = an.analyse(sweep_dir)
+    out = sweep_dir / "analysis"
+    for name in ("capacity", "fd_summary", "safety", "boundary", "flock", "failed"):
+        assert (out / f"{name}.csv").is_file() and (out / f"{name}.md").is_file()
+    assert (out / "fd_runs.csv").is_file() and (out / "fd_intervals.csv").is_file()
+    failed = pd.read_csv(out / "failed.csv")
+    assert list(failed["run_id"]) == ["bad"] and "boom" in failed.loc[0, "error"]
+    report = (out / "report.md").read_text()
+    assert "18 ok, 1 failed" in report and "## Capacity" in report
+    figs = {p.name for p in a.files if p.suffix == ".png"}
+    assert figs == {"fundamental_diagram.png", "capacity.png",
+                    "r130001_time_space.png", "r130001_top_view.png"}
+    for name in figs:
+        assert (out / "figures" / name).read_bytes()[:8] == PNG
+
+
+def test_command_line(sweep_dir, tmp_path, capsys):
+    assert an.main([str(sweep_dir), "--no-figures", "--out", str(tmp_path / "a")]) == 0
+    text = capsys.readouterr().out
+    assert "capacity" in text and "1 failed runs" in text
+    assert not (tmp_path / "a" / "figures").exists()
+    assert an.main([str(tmp_path / "nowhere")]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+    assert an.main([str(sweep_dir), "--run", "r010001"]) == 2  # no trajectories there
+    assert "trajectories" in capsys.readouterr().err
+    # a single run's folder: the run figures
+    run = sweep_dir / "runs" / "r130001"
+    (run / "summary.csv").write_text("edie_flow_vph\n1.0\n")
+    assert an.main([str(run), "--times", "1", "5"]) == 0
+    assert (run / "analysis" / "top_view.png").is_file()
+
+
+def test_road_geometry_from_the_network_table():
+    edges, lanes, period = fg.road_geometry(
+        {"kind": "varying_width", "width_profile": [[100.0, 10.2], [50.0, 6.8], [100.0, 10.2]]}
+    )
+    r, l = edges(np.array([50.0, 120.0, 200.0]))
+    assert np.allclose(l, [5.1, 3.4, 5.1]) and np.allclose(r, -l)
+    assert lanes == [] and period is None
+    edges, lanes, period = fg.road_geometry({"kind": "three_lane", "width_m": 10.2})
+    assert np.allclose(lanes, [-1.7, 1.7])
+    _, _, period = fg.road_geometry({"kind": "ring", "circumference_m": 500.0})
+    assert period == 500.0
+    assert fg.road_geometry({"kind": "file"})[0] is None
+
+
+def test_run_figures_on_a_ring(tmp_path):
+    run = tmp_path / "ring_run"
+    run.mkdir()
+    _trajectory_run(run, period=100.0)
+    (run / "config.toml").write_text('[network]\nkind = "ring"\ncircumference_m = 100.0\n')
+    paths = fg.plot_run(run, tmp_path / "figs", times=[2.0])
+    assert [p.name for p in paths] == ["time_space.png", "top_view.png"]
+    assert all(p.read_bytes()[:8] == PNG for p in paths)
+    assert fg.series_label(["demand.cav_share", "controller.kind", "network.width_m"],
+                           [0.25, "flocking", 8.0]) == "CAV 25% flocking width_m=8"
