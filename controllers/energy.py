@@ -45,8 +45,14 @@ def flock_energy(
     n_pairs_total = n * (n - 1) // 2
     far = n_pairs_total - len(pairs)
     if far:
-        h += prm.c1_alpha * far * float(
-            psi_alpha(np.array(law.r_alpha), law.r_alpha, law.d_alpha, prm.h_alpha, prm.a, prm.b)
+        h += (
+            prm.c1_alpha
+            * far
+            * float(
+                psi_alpha(
+                    np.array(law.r_alpha), law.r_alpha, law.d_alpha, prm.h_alpha, prm.a, prm.b
+                )
+            )
         )
     if q_r is not None:
         e = q - q_r

@@ -24,9 +24,7 @@ def _wrap(dq: np.ndarray, period: float | None) -> np.ndarray:
     return dq
 
 
-def neighbour_pairs_dense(
-    x: np.ndarray, radius: float, period: float | None = None
-) -> np.ndarray:
+def neighbour_pairs_dense(x: np.ndarray, radius: float, period: float | None = None) -> np.ndarray:
     """Reference implementation: all pairs i < j with ``||x_j - x_i|| < radius``.
 
     ``x`` (N, m); returns (P, 2) int64. Builds N x N arrays: small N only.
@@ -40,9 +38,7 @@ def neighbour_pairs_dense(
     return np.stack([i, j], axis=1).astype(np.int64)
 
 
-def neighbour_pairs_tree(
-    x: np.ndarray, radius: float, period: float | None = None
-) -> np.ndarray:
+def neighbour_pairs_tree(x: np.ndarray, radius: float, period: float | None = None) -> np.ndarray:
     """All pairs i < j with ``||x_j - x_i|| < radius`` via a KD-tree; (P, 2) int64."""
     n = len(x)
     if n < 2:
@@ -115,7 +111,7 @@ def cross_pairs(
         lists = cKDTree(x).query_ball_tree(tree_y, np.nextafter(radius, 0.0))
     else:
         both, box = tree_points(np.vstack([x, y]), radius, period)
-        tree_y = cKDTree(both[len(x):], boxsize=box)
+        tree_y = cKDTree(both[len(x) :], boxsize=box)
         lists = cKDTree(both[: len(x)], boxsize=box).query_ball_tree(
             tree_y, np.nextafter(radius, 0.0)
         )
