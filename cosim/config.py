@@ -86,6 +86,9 @@ class ControllerSpec:
         standstill_gap_m: standstill gap s0 of that policy, m.
         lateral_margin_m: extra lateral width within which a vehicle ahead
             counts as the leader for the time-gap policy, m.
+        comm: CommConfig fields (table [controller.comm], controllers/communication.py):
+            when given, each CAV acts on received, delayed or lost messages of the
+            other CAVs (seed 001) instead of their true states.
     """
 
     kind: str = "flocking"
@@ -94,6 +97,7 @@ class ControllerSpec:
     time_gap_s: float = 0.8
     standstill_gap_m: float = 2.0
     lateral_margin_m: float = 0.3
+    comm: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if self.kind not in CONTROLLER_KINDS:
@@ -108,6 +112,24 @@ class ControllerSpec:
                 f"controller.lateral_damping must be >= 0, got {self.lateral_damping}"
             )
         self.flocking_params()  # validate now
+        self.comm_config()
+
+    def comm_config(self):
+        """The validated CommConfig, or None when [controller.comm] is empty."""
+        if not self.comm:
+            return None
+        from controllers.communication import CommConfig
+
+        known = {f.name for f in fields(CommConfig)}
+        for key in self.comm:
+            if key not in known:
+                raise ConfigError(
+                    f"controller.comm: unknown key {key!r} (known: {', '.join(sorted(known))})"
+                )
+        try:
+            return CommConfig(**self.comm)
+        except (ValueError, TypeError) as exc:
+            raise ConfigError(f"controller.comm: {exc}") from None
 
     def flocking_params(self) -> FlockingParams:
         """The validated FlockingParams (road defaults overridden by [controller.params])."""
@@ -424,9 +446,14 @@ def scenario_from_dict(data: dict, base: Scenario | None = None) -> Scenario:
         if name in data:
             if not isinstance(data[name], dict):
                 raise ConfigError(f"[{name}] must be a table")
-            if name == "controller" and "params" in data[name]:
-                merged["params"] = {**merged.get("params", {}), **data[name]["params"]}
-                rest = {k: v for k, v in data[name].items() if k != "params"}
+            if name == "controller":
+                for sub_table in ("params", "comm"):
+                    if sub_table in data[name]:
+                        if not isinstance(data[name][sub_table], dict):
+                            raise ConfigError(f"[controller.{sub_table}] must be a table")
+                        merged[sub_table] = {**merged.get(sub_table, {}),
+                                             **data[name][sub_table]}
+                rest = {k: v for k, v in data[name].items() if k not in ("params", "comm")}
                 merged.update(rest)
             else:
                 merged.update(data[name])

@@ -192,7 +192,13 @@ def _build_controller(sc: Scenario):
     layers = [AccelerationBox(lim.long_min_mps2, lim.long_max_mps2, lim.lat_max_mps2)]
     if lim.jerk_max_mps3 > 0:
         layers.append(JerkLimit(lim.jerk_max_mps3))
-    return ConstrainedController(OlfatiSaberController(sc.controller.flocking_params()), layers)
+    law = OlfatiSaberController(sc.controller.flocking_params())
+    comm = sc.controller.comm_config()
+    if comm is not None:
+        from controllers.communication import CommunicatingController
+
+        law = CommunicatingController(law, comm)
+    return ConstrainedController(law, layers)
 
 
 def _loop(sc, net, world: SumoWorld, routes, zone, xs, progress: bool) -> RunResult:
