@@ -109,11 +109,22 @@ def run_scenario(
     gui: bool = False,
     progress: bool = False,
 ) -> RunResult:
-    """Run ``sc`` in SUMO and return (and, with ``out_dir``, write) its results."""
+    """Run ``sc`` in SUMO and return (and, with ``out_dir``, write) its results.
+
+    Without ``out_dir`` SUMO's input files live in a temporary folder that is
+    removed when the run ends; the results come back in memory.
+    """
+    if out_dir is None:
+        with tempfile.TemporaryDirectory(prefix="cosim_") as tmp:
+            return _run_in(sc, Path(tmp), None, gui, progress)
+    return _run_in(sc, Path(out_dir), Path(out_dir), gui, progress)
+
+
+def _run_in(sc: Scenario, work: Path, out_dir: Path | None, gui: bool,
+            progress: bool) -> RunResult:
     t_wall = time.perf_counter()
     run = sc.scenario
     net = build_network(sc.network)
-    work = Path(out_dir) if out_dir is not None else Path(tempfile.mkdtemp(prefix="cosim_"))
     work.mkdir(parents=True, exist_ok=True)
     demand = dataclasses.replace(sc.demand, duration_s=run.duration_s)
     routes = write_routes(net, demand, run.seed, work / "routes.rou.xml")
@@ -238,13 +249,12 @@ def _loop(sc, net, world: SumoWorld, routes, zone, xs, progress: bool) -> RunRes
 
         bar = tqdm(total=n_steps, unit="step", desc=run.name, leave=False)
     for k in range(n_steps):
-        ts = world.ts
         if obstacle_id is None and sc.obstacle.present and k * dt >= sc.obstacle.appear_s:
             ob = sc.obstacle
             obstacle_id = world.add_obstacle(ob.s_m, ob.d_m, ob.length_m, ob.width_m)
         world.step()
-        departed.update(ts.simulation.getDepartedIDList())
-        arrived.update(ts.simulation.getArrivedIDList())
+        departed.update(world.departed_now)
+        arrived.update(world.arrived_now)
         world.hold_obstacle()
         t = world.time
         va = world.read()
@@ -353,6 +363,9 @@ def _edges_ahead(net, s: np.ndarray, v: np.ndarray, period: float | None) -> np.
     1.7 m shift takes over a second, so the edges ahead (up to 4 s of travel)
     bound the lateral position, not only the edges at the vehicle.
     """
+    if len(set(net.segment_width)) == 1:  # constant width: no look-ahead needed
+        half = 0.5 * net.segment_width[0]
+        return np.column_stack([np.full(len(s), -half), np.full(len(s), half)])
     right = np.full(len(s), -np.inf)
     left = np.full(len(s), np.inf)
     for horizon in EDGE_LOOKAHEAD_S:
@@ -369,7 +382,7 @@ def _control_step(sc, net, world, controller, safety, va, cav_rows, idx_main, ed
                   edges_l, v_des, v_cap, dt, period) -> None:
     """One control step for the CAVs on the main road."""
     pos_in_main = np.searchsorted(idx_main, cav_rows)
-    others = np.setdiff1d(idx_main, cav_rows, assume_unique=True)
+    others = np.flatnonzero(va.on_main & ~va.is_cav)
     ids = [va.ids[r] for r in cav_rows]
     q = np.column_stack([va.s[cav_rows], va.d[cav_rows]])
     p = np.column_stack([va.v[cav_rows], va.v_lat[cav_rows]])

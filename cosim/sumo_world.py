@@ -30,6 +30,7 @@ _VARS = None
 
 
 def _vars():
+    """Dynamic variables subscribed per vehicle (static ones are read once at departure)."""
     global _VARS
     if _VARS is None:
         import libsumo as ls
@@ -40,9 +41,6 @@ def _vars():
             ls.VAR_LANEPOSITION_LAT,
             ls.VAR_SPEED,
             ls.VAR_SPEED_LAT,
-            ls.VAR_LENGTH,
-            ls.VAR_WIDTH,
-            ls.VAR_TYPE,
         )
     return _VARS
 
@@ -130,6 +128,10 @@ class SumoWorld:
         self.cmd = [sumo_binary(gui), "-n", str(net.net_file), *sumo_args]
         self.ts = None
         self.types: dict[str, str] = {}
+        self._static: dict[str, tuple[float, float, bool]] = {}  # length, width, is_cav
+        self._lane_info: dict[str, tuple[float, float, bool]] = {}  # offset, lane d, on main
+        self.departed_now: list[str] = []
+        self.arrived_now: list[str] = []
         self.controlled: set[str] = set()
         self.v_lat_state: dict[str, float] = {}
         self.period = net.length_m if net.periodic else None
@@ -178,45 +180,59 @@ class SumoWorld:
         """Advance SUMO one step and register departures and arrivals."""
         ts = self.ts
         ts.simulationStep()
-        for vid in ts.simulation.getDepartedIDList():
-            ts.vehicle.subscribe(vid, _vars())
-            self.types[vid] = ts.vehicle.getTypeID(vid)
-        for vid in ts.simulation.getArrivedIDList():
+        self.departed_now = list(ts.simulation.getDepartedIDList())
+        self.arrived_now = list(ts.simulation.getArrivedIDList())
+        veh = ts.vehicle
+        for vid in self.departed_now:
+            veh.subscribe(vid, _vars())
+            tid = veh.getTypeID(vid)
+            self.types[vid] = tid
+            self._static[vid] = (
+                veh.getLength(vid), veh.getWidth(vid), tid.startswith(self.cav_prefix)
+            )
+        for vid in self.arrived_now:
             self.types.pop(vid, None)
+            self._static.pop(vid, None)
             self.controlled.discard(vid)
             self.v_lat_state.pop(vid, None)
 
+    def _lane(self, lane: str) -> tuple[float, float, bool]:
+        info = self._lane_info.get(lane)
+        if info is None:
+            off = self.net.lane_offsets.get(lane, np.nan)
+            info = (off, self.net.lane_d.get(lane, 0.0), lane in self.main_lanes)
+            self._lane_info[lane] = info
+        return info
+
     def read(self) -> VehicleArrays:
         """All vehicles on the network, in the road frame (centre positions)."""
-        ls = self.ts
-        res = ls.vehicle.getAllSubscriptionResults()
-        v_lane, v_pos, v_lat, v_speed, v_slat, v_len, v_wid, _ = _vars()
+        res = self.ts.vehicle.getAllSubscriptionResults()
+        v_lane, v_pos, v_lat, v_speed, v_slat = _vars()
         ids = list(res.keys())
         n = len(ids)
         lane = [None] * n
-        arr = np.empty((n, 6))
+        rows = [None] * n
+        static = self._static
+        lane_info = self._lane
+        vlat_state = self.v_lat_state
         for k, vid in enumerate(ids):
             r = res[vid]
-            lane[k] = r[v_lane]
-            arr[k, 0] = r[v_pos]
-            arr[k, 1] = r[v_lat]
-            arr[k, 2] = r[v_speed]
-            arr[k, 3] = r[v_slat]
-            arr[k, 4] = r[v_len]
-            arr[k, 5] = r[v_wid]
-        s_front = self.net.s_of_many(lane, arr[:, 0]) if n else np.empty(0)
+            ln = r[v_lane]
+            lane[k] = ln
+            off, ld, main = lane_info(ln)
+            length, width, cav = static[vid]
+            rows[k] = (r[v_pos], r[v_lat], r[v_speed], vlat_state.get(vid, r[v_slat]),
+                       length, width, off, ld, main, cav)
+        arr = np.array(rows, dtype=float).reshape(n, 10)
+        s_front = arr[:, 6] + arr[:, 0]
+        if self.period is not None:
+            s_front = np.mod(s_front, self.period)
         s = s_front - 0.5 * arr[:, 4]
         if self.period is not None:
             s = np.mod(s, self.period)
-        d = arr[:, 1] + np.array([self.net.lane_d.get(x, 0.0) for x in lane]) if n else arr[:, 1]
-        is_cav = np.array([self.types.get(v, "").startswith(self.cav_prefix) for v in ids], bool)
-        v_lat_now = arr[:, 3].copy()
-        for k, vid in enumerate(ids):
-            if vid in self.v_lat_state:
-                v_lat_now[k] = self.v_lat_state[vid]
-        on_main = np.array([x in self.main_lanes for x in lane], bool) & ~np.isnan(s)
-        return VehicleArrays(ids, lane, s_front, s, d, arr[:, 2], v_lat_now, arr[:, 4],
-                             arr[:, 5], is_cav, on_main)
+        on_main = (arr[:, 8] > 0) & ~np.isnan(s)
+        return VehicleArrays(ids, lane, s_front, s, arr[:, 1] + arr[:, 7], arr[:, 2], arr[:, 3],
+                             arr[:, 4], arr[:, 5], arr[:, 9] > 0, on_main)
 
     def take_over(self, vid: str) -> None:
         """Hand a CAV to our controller: no SUMO speed checks, no SUMO lane changes."""
