@@ -107,10 +107,12 @@ class DemandSpec:
         insertion: open roads on one wide lane: ``"slots"`` (default) spreads
             departures over lateral slots across the road, each vehicle in the
             slot that has been free longest, never two in one slot closer than
-            ``slot_headway_s`` (a later departure if needed), and inserts them
-            without SUMO's insertion check; ``"sumo"`` leaves insertion to SUMO,
-            whose single-point insertion on one lane caps the inflow near
-            4 000-5 500 veh/h whatever the lane's width.
+            ``slot_headway_s`` (a later departure if needed), at no more than
+            the speed of the slot's previous vehicle; SUMO's own insertion check
+            still applies (it respects lateral positions), so a vehicle waits
+            when its slot is blocked. ``"sumo"``: random lateral positions and
+            SUMO's departure speeds, which caps the inflow of one wide lane near
+            4 000-5 500 veh/h.
         slot_headway_s: minimum time between two departures in one slot, s.
         slot_spacing_m: lateral distance between slot centres, m.
     """
@@ -342,7 +344,6 @@ def _open_stream(
                 depart_lat=None if multi else f"{lat[i]:.3f}",
                 depart_lane=str(lanes[i]) if multi else "0",
                 depart_speed=f"{v_depart[i]:.3f}" if slotted else demand.depart_speed,
-                insertion_checks="none" if slotted else None,
             )
         )
     return out
