@@ -34,7 +34,9 @@ from .demand import DemandSpec
 from .errors import ConfigError
 from .network_build import NetworkSpec
 
-CONTROLLER_KINDS = ("flocking", "sumo")  # "sumo": SUMO drives the CAVs too (baseline)
+# "flocking": Olfati-Saber with the road extensions; "boundary_points": seed 003's law
+# (others and road edges seen as boundary points); "sumo": SUMO drives the CAVs (baseline).
+CONTROLLER_KINDS = ("flocking", "boundary_points", "sumo")
 
 
 @dataclass(frozen=True)
@@ -112,6 +114,8 @@ class ControllerSpec:
                 f"controller.lateral_damping must be >= 0, got {self.lateral_damping}"
             )
         self.flocking_params()  # validate now
+        if self.kind == "boundary_points":
+            self.boundary_point_params()
         self.comm_config()
 
     def comm_config(self):
@@ -131,8 +135,25 @@ class ControllerSpec:
         except (ValueError, TypeError) as exc:
             raise ConfigError(f"controller.comm: {exc}") from None
 
+    def boundary_point_params(self):
+        """Seed 003 parameters for the road (road defaults overridden by [controller.params])."""
+        from controllers.boundary_points import BoundaryPointParams
+
+        base = dict(ROAD_BOUNDARY_POINT_DEFAULTS)
+        known = {f.name for f in fields(BoundaryPointParams)}
+        for key, value in self.params.items():
+            if key not in known:
+                raise ConfigError(f"controller.params: unknown key {key!r} for boundary_points")
+            base[key] = value
+        try:
+            return BoundaryPointParams(**base)
+        except (ValueError, TypeError) as exc:
+            raise ConfigError(f"controller.params: {exc}") from None
+
     def flocking_params(self) -> FlockingParams:
         """The validated FlockingParams (road defaults overridden by [controller.params])."""
+        if self.kind == "boundary_points":
+            return road_flocking_defaults()
         base = dataclasses.asdict(road_flocking_defaults())
         known = {f.name for f in fields(FlockingParams)}
         for key, value in self.params.items():
@@ -143,6 +164,33 @@ class ControllerSpec:
             return FlockingParams(**base)
         except (ValueError, TypeError) as exc:
             raise ConfigError(f"controller.params: {exc}") from None
+
+
+# Seed 003's law scaled to cars (table 3 is for point robots at 5 m/s): sensing radius
+# 15 m, spacing 6 m; p_max = 10 m/s is the largest *relative* speed between neighbours
+# on a road (so d_e = d_min + 2 p_max dt = 3 m); separation weight tau_s = 10 instead of
+# 1e4 because cars side by side sit inside d_e; bounded (sigma_1) pull to the goal.
+ROAD_BOUNDARY_POINT_DEFAULTS = {
+    "r": 15.0,
+    "d": 6.0,
+    "epsilon": 0.1,
+    "a": 2.0,
+    "b": 20.0,
+    "c1_alpha": 0.05,
+    "c2_alpha": 0.3,
+    "c1_beta": 0.05,
+    "c2_beta": 0.3,
+    "c1_gamma": 0.5,
+    "c2_gamma": 0.5,
+    "tau_a": 0.1,
+    "tau_e": 1.0,
+    "tau_s": 10.0,
+    "p_max": 10.0,
+    "d_min": 1.0,
+    "dt": 0.1,
+    "gamma_position": "sigma1",
+    "beta_potential": "repulsive",
+}
 
 
 def road_flocking_defaults() -> FlockingParams:

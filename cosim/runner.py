@@ -203,7 +203,12 @@ def _build_controller(sc: Scenario):
     layers = [AccelerationBox(lim.long_min_mps2, lim.long_max_mps2, lim.lat_max_mps2)]
     if lim.jerk_max_mps3 > 0:
         layers.append(JerkLimit(lim.jerk_max_mps3))
-    law = OlfatiSaberController(sc.controller.flocking_params())
+    if sc.controller.kind == "boundary_points":
+        from controllers.boundary_points import BoundaryPointController
+
+        law = BoundaryPointController(sc.controller.boundary_point_params())
+    else:
+        law = OlfatiSaberController(sc.controller.flocking_params())
     comm = sc.controller.comm_config()
     if comm is not None:
         from controllers.communication import CommunicatingController
@@ -217,7 +222,7 @@ def _loop(sc, net, world: SumoWorld, routes, zone, xs, progress: bool) -> RunRes
     dt = run.step_length_s
     n_steps = int(round(run.duration_s / dt))
     period = net.length_m if net.periodic else None
-    controlling = sc.controller.kind == "flocking"
+    controlling = sc.controller.kind in ("flocking", "boundary_points")
     controller = _build_controller(sc)
     safety = SafetyLayer(
         SafetyConfig(
@@ -378,6 +383,46 @@ def _edges_ahead(net, s: np.ndarray, v: np.ndarray, period: float | None) -> np.
     return np.column_stack([right, left])
 
 
+BP_GOAL_AHEAD_M = 50.0  # m: seed 003 gamma-agent placed this far ahead of each CAV
+BP_SPACING_M = 1.0  # m: spacing of boundary points on vehicles and road edges
+# Road edges as boundary points: off. Every car is always within seed 003's early-warning
+# distance of both edges of a 10.2 m road, so edge points jam the flock; the edges are
+# kept by the safety layer instead (measured: 0.5 m/s mean speed with edge points on).
+BP_ROAD_EDGES = False
+
+
+def _boundary_points(net, va, others: np.ndarray, s_cav: np.ndarray, period) -> dict:
+    """Seed 003 inputs on the road: perimeters of the non-CAV vehicles (moving with them)
+    and the road edges near the CAVs, as boundary points (K, 2) m with velocities (K, 2)."""
+    pts, vel = [], []
+    if len(others):
+        for r in others:
+            hl, hw = 0.5 * va.length[r], 0.5 * va.width[r]
+            xs = np.arange(-hl, hl + 1e-9, BP_SPACING_M)
+            ys = np.arange(-hw, hw + 1e-9, BP_SPACING_M)
+            ring = np.vstack([
+                np.column_stack([xs, np.full_like(xs, -hw)]),
+                np.column_stack([xs, np.full_like(xs, hw)]),
+                np.column_stack([np.full_like(ys, -hl), ys]),
+                np.column_stack([np.full_like(ys, hl), ys]),
+            ])
+            pts.append(ring + [va.s[r], va.d[r]])
+            vel.append(np.tile([va.v[r], va.v_lat[r]], (len(ring), 1)))
+    if len(s_cav) and BP_ROAD_EDGES:
+        lo, hi = float(s_cav.min()) - 40.0, float(s_cav.max()) + 40.0
+        s = np.arange(lo, hi, BP_SPACING_M)
+        s_eval = np.mod(s, period) if period is not None else np.clip(s, 0.0, net.length_m)
+        right, left = net.edges_at(s_eval)
+        pts += [np.column_stack([s, right]), np.column_stack([s, left])]
+        vel += [np.zeros((len(s), 2)), np.zeros((len(s), 2))]
+    if not pts:
+        return {}
+    q = np.vstack(pts)
+    if period is not None:
+        q[:, 0] = np.mod(q[:, 0], period)
+    return {"boundary_points": q, "boundary_point_velocities": np.vstack(vel)}
+
+
 def _control_step(sc, net, world, controller, safety, va, cav_rows, idx_main, edges_r,
                   edges_l, v_des, v_cap, dt, period) -> None:
     """One control step for the CAVs on the main road."""
@@ -397,13 +442,20 @@ def _control_step(sc, net, world, controller, safety, va, cav_rows, idx_main, ed
                           period=period, lateral_margin_m=ctl.lateral_margin_m)
         desired = time_gap_speed(desired, gap, ctl.time_gap_s, ctl.standstill_gap_m)
     leader_p[:, 0] = desired
+    extras = {}
+    leader_q = None
+    if ctl.kind == "boundary_points":
+        extras = _boundary_points(net, va, others, q[:, 0], period)
+        # gamma-agent ahead of each CAV in its own lateral position (seed 003's goal)
+        leader_q = q + np.array([BP_GOAL_AHEAD_M, 0.0])
     obs = Observation(
         q=q, p=p, t=world.time, dt=dt, ids=np.array(ids, dtype=object),
         length=va.length[cav_rows], width=va.width[cav_rows],
         others_q=np.column_stack([va.s[others], va.d[others]]),
         others_p=np.column_stack([va.v[others], va.v_lat[others]]),
         others_length=va.length[others], others_width=va.width[others],
-        road_edges=edges, leader_p=leader_p, period_s=period,
+        road_edges=edges, leader_p=leader_p, leader_q=leader_q, period_s=period,
+        extras=extras,
     )
     u = controller.compute(obs)
     if sc.controller.lateral_damping > 0:
