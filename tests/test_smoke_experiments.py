@@ -21,7 +21,7 @@ def _run(args: list[str], timeout: float = 600.0) -> subprocess.CompletedProcess
 
 @pytest.mark.parametrize(
     "script",
-    ["seed002_formation.py", "seed004_vicsek.py", "seed001_delays.py"],
+    ["seed002_formation.py", "seed004_vicsek.py", "seed001_delays.py", "seed003_obstacles.py"],
 )
 def test_seed_experiment_smoke_writes_csv_and_png(tmp_path, script):
     _run([sys.executable, str(REPO / "experiments" / script), "--smoke", "--out", str(tmp_path)])
