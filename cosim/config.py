@@ -139,29 +139,22 @@ class ControllerSpec:
         """Seed 003 parameters for the road (road defaults overridden by [controller.params])."""
         from controllers.boundary_points import BoundaryPointParams
 
-        base = dict(ROAD_BOUNDARY_POINT_DEFAULTS)
-        known = {f.name for f in fields(BoundaryPointParams)}
-        for key, value in self.params.items():
-            if key not in known:
-                raise ConfigError(f"controller.params: unknown key {key!r} for boundary_points")
-            base[key] = value
-        try:
-            return BoundaryPointParams(**base)
-        except (ValueError, TypeError) as exc:
-            raise ConfigError(f"controller.params: {exc}") from None
+        return self._params(BoundaryPointParams, ROAD_BOUNDARY_POINT_DEFAULTS)
 
     def flocking_params(self) -> FlockingParams:
         """The validated FlockingParams (road defaults overridden by [controller.params])."""
         if self.kind == "boundary_points":
             return road_flocking_defaults()
-        base = dataclasses.asdict(road_flocking_defaults())
-        known = {f.name for f in fields(FlockingParams)}
-        for key, value in self.params.items():
+        return self._params(FlockingParams, dataclasses.asdict(road_flocking_defaults()))
+
+    def _params(self, cls: type, defaults: dict):
+        """``cls(**(defaults | [controller.params]))``, errors as one ConfigError line."""
+        known = {f.name for f in fields(cls)}
+        for key in self.params:
             if key not in known:
-                raise ConfigError(f"controller.params: unknown key {key!r}")
-            base[key] = value
+                raise ConfigError(f"controller.params: unknown key {key!r} for {self.kind}")
         try:
-            return FlockingParams(**base)
+            return cls(**{**defaults, **self.params})
         except (ValueError, TypeError) as exc:
             raise ConfigError(f"controller.params: {exc}") from None
 
