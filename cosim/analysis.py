@@ -35,7 +35,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,7 +43,8 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # numpy and pandas are imported where used: `cosim --help` stays fast
     import pandas as pd
 
-from .errors import ConfigError, CosimError
+from .cli_errors import run_command
+from .errors import ConfigError
 
 DEMAND_COLUMNS = ("demand.inflow_vph", "demand.ring_density_vpkm")
 #: Always part of a series (the brief: one curve per CAV share and controller).
@@ -598,8 +598,4 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="cosim analyse", description=__doc__.splitlines()[0])
     _add_arguments(ap)
     ns = ap.parse_args(argv)
-    try:
-        return ns.func(ns)
-    except CosimError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+    return run_command(ns.func, ns)

@@ -13,6 +13,7 @@ from datetime import datetime
 from pathlib import Path
 
 from .analysis import add_analyse_parser
+from .cli_errors import run_command
 from .errors import CosimError
 from .sweep import add_sweep_parser
 
@@ -165,14 +166,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     ns = build_parser().parse_args(argv)
-    try:
-        return ns.func(ns)
-    except CosimError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
-        return 130
+    return run_command(ns.func, ns)
 
 
 if __name__ == "__main__":

@@ -90,6 +90,7 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from .cli_errors import run_command
 from .errors import ConfigError, CosimError
 
 if TYPE_CHECKING:  # cosim.config (numpy, ...) is imported where used: the CLI stays fast
@@ -1027,11 +1028,4 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="cosim sweep", description=__doc__.splitlines()[0])
     _add_arguments(ap)
     ns = ap.parse_args(argv)
-    try:
-        return ns.func(ns)
-    except CosimError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("error: interrupted (finished runs are kept; use --resume)", file=sys.stderr)
-        return 130
+    return run_command(ns.func, ns, "interrupted (finished runs are kept; use --resume)")
