@@ -100,27 +100,81 @@ def cross_pairs(
 ) -> np.ndarray:
     """Pairs (i, k) with ``||y_k - x_i|| < radius`` between two point sets; (P, 2) int64.
 
-    Used for agents versus sensed vehicles or obstacle boundary points.
+    Used for agents versus sensed vehicles or obstacle boundary points. Pairs
+    are grouped by ``i`` in increasing order, deterministically. Point sets in
+    a strip thinner than the radius along axes 1.. (a road seen from above)
+    take a sort-and-window path along axis 0 (``strip_cross_pairs``); others
+    a KD-tree.
     """
     x = np.asarray(x, dtype=float)
     y = np.asarray(y, dtype=float)
     if len(x) == 0 or len(y) == 0:
         return np.empty((0, 2), dtype=np.int64)
+    if _is_strip(x, y, radius, period):
+        return strip_cross_pairs(x, y, radius, period)
     if period is None:
-        tree_y = cKDTree(y)
-        lists = cKDTree(x).query_ball_tree(tree_y, np.nextafter(radius, 0.0))
+        tree_x, tree_y = cKDTree(x), cKDTree(y)
     else:
         both, box = tree_points(np.vstack([x, y]), radius, period)
+        tree_x = cKDTree(both[: len(x)], boxsize=box)
         tree_y = cKDTree(both[len(x) :], boxsize=box)
-        lists = cKDTree(both[: len(x)], boxsize=box).query_ball_tree(
-            tree_y, np.nextafter(radius, 0.0)
-        )
-    counts = np.fromiter((len(v) for v in lists), dtype=np.int64, count=len(lists))
-    if counts.sum() == 0:
+    # sparse_distance_matrix uses <= r: shrink by one ulp to match the strict "<".
+    m = tree_x.sparse_distance_matrix(tree_y, np.nextafter(radius, 0.0), output_type="ndarray")
+    return _sorted_pairs(m["i"].astype(np.int64), m["j"].astype(np.int64), len(y))
+
+
+def _sorted_pairs(i: np.ndarray, k: np.ndarray, n_y: int) -> np.ndarray:
+    key = i * n_y + k
+    key.sort()
+    out = np.empty((len(key), 2), dtype=np.int64)
+    np.divmod(key, n_y, out=(out[:, 0], out[:, 1]))
+    return out
+
+
+def _is_strip(x: np.ndarray, y: np.ndarray, radius: float, period: float | None) -> bool:
+    """True when every point lies within a band of width < radius across axis 0."""
+    if x.shape[1] < 2:
+        return False
+    lo = np.minimum(x[:, 1:].min(axis=0), y[:, 1:].min(axis=0))
+    hi = np.maximum(x[:, 1:].max(axis=0), y[:, 1:].max(axis=0))
+    if np.any(hi - lo >= radius):
+        return False
+    return period is None or period > 2.0 * radius
+
+
+def strip_cross_pairs(
+    x: np.ndarray, y: np.ndarray, radius: float, period: float | None = None
+) -> np.ndarray:
+    """``cross_pairs`` by sorting ``y`` along axis 0 and windowing ``|dx_0| < radius``.
+
+    Exact for any input (candidates are filtered by the true distance); fast
+    when the points are spread along axis 0 and thin across it, since then the
+    window holds few more candidates than the ball. Periodic axis 0 needs
+    ``period > 2 radius``. (P, 2) int64 grouped by ``i``; within a group ``k``
+    follows axis 0.
+    """
+    key = y[:, 0] if period is None else np.mod(y[:, 0], period)
+    order = np.argsort(key, kind="stable")
+    s_sorted = key[order]
+    if period is not None:  # copies one period below and above close the ring
+        s_sorted = np.concatenate([s_sorted - period, s_sorted, s_sorted + period])
+        order = np.concatenate([order, order, order])
+    s_x = x[:, 0] if period is None else np.mod(x[:, 0], period)
+    lo = np.searchsorted(s_sorted, s_x - radius, side="right")
+    hi = np.searchsorted(s_sorted, s_x + radius, side="left")
+    counts = np.maximum(hi - lo, 0)
+    total = int(counts.sum())
+    if total == 0:
         return np.empty((0, 2), dtype=np.int64)
     i = np.repeat(np.arange(len(x), dtype=np.int64), counts)
-    k = np.fromiter((kk for v in lists for kk in v), dtype=np.int64, count=int(counts.sum()))
-    return np.stack([i, k], axis=1)
+    # position inside each window: global index minus the window's first index
+    starts = np.cumsum(counts) - counts
+    pos = np.arange(total, dtype=np.int64) - np.repeat(starts, counts) + np.repeat(lo, counts)
+    k = order[pos].astype(np.int64, copy=False)
+    dq = y[k] - x[i]
+    dq = _wrap(dq, period)
+    keep = np.einsum("ij,ij->i", dq, dq) < radius * radius
+    return np.stack([i[keep], k[keep]], axis=1)
 
 
 def scatter_add(n: int, index: np.ndarray, values: np.ndarray) -> np.ndarray:

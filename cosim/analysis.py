@@ -332,15 +332,20 @@ def _aggregate(res: SweepResults, spec, extra_prefix: str | None = None) -> pd.D
 def safety_table(res: SweepResults) -> pd.DataFrame:
     """Collisions (sums over seeds), minimum gaps and clearances, headways, per series x demand.
 
-    ``collisions_cav_per_1e6_vehicle_steps`` = (SUMO-reported collisions involving a CAV)
-    per million vehicle-steps in the measurement zone.
+    ``collisions_cav_per_1e6_vehicle_steps`` = collision events involving a CAV (the
+    geometric check, which always runs: a pair of rectangles that starts to overlap) per
+    million vehicle-steps in the measurement zone. SUMO's own list
+    (``collisions_sumo_*``, one entry per step of overlap) is empty when a run set
+    ``outputs.sumo_collisions = false``.
     """
     import numpy as np
 
     df = _aggregate(res, SAFETY_AGG)
-    if {"collisions_sumo_cav_sum", "vehicle_steps_sum"} <= set(df.columns):
+    if {"collisions_geometric_cav_sum", "vehicle_steps_sum"} <= set(df.columns):
         steps = df["vehicle_steps_sum"].replace(0, np.nan)
-        df["collisions_cav_per_1e6_vehicle_steps"] = df["collisions_sumo_cav_sum"] / steps * 1e6
+        df["collisions_cav_per_1e6_vehicle_steps"] = (
+            df["collisions_geometric_cav_sum"] / steps * 1e6
+        )
     return df
 
 

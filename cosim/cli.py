@@ -27,6 +27,7 @@ SUMMARY_KEYS = [
     ("collisions_sumo_cav", "collisions with a CAV (SUMO)", "", "{:.0f}"),
     ("collisions_geometric_cav", "collisions with a CAV (geometric)", "", "{:.0f}"),
     ("collisions_sumo_hdv_only", "collisions HDV-only (SUMO)", "", "{:.0f}"),
+    ("collisions_geometric_hdv_only", "collisions HDV-only (geometric)", "", "{:.0f}"),
     ("boundary_vehicle_steps", "boundary violations (all)", "veh-steps", "{:.0f}"),
     ("boundary_vehicle_steps_cav", "boundary violations (CAVs)", "veh-steps", "{:.0f}"),
     ("min_gap_m", "min bumper-to-bumper gap", "m", "{:.2f}"),
@@ -66,6 +67,9 @@ def format_summary(row: dict) -> str:
     for key, label, unit, fmt in SUMMARY_KEYS:
         if key in row:
             val = row[key]
+            if val is None or (isinstance(val, float) and val != val):
+                lines.append(f"  {label:<36} {'n/a':>10}")
+                continue
             try:
                 text = fmt.format(val)
             except (TypeError, ValueError):

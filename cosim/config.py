@@ -309,6 +309,11 @@ class OutputSpec:
         trajectories: write one row per vehicle and step (large).
         trajectory_every: keep every k-th step in the trajectories.
         sumo_detectors: also write SUMO's E1 loops and edgeData for comparison.
+        sumo_collisions: also let SUMO detect collisions (``--collision.action
+            warn``; counted as ``collisions_sumo_*``). Our geometric check
+            (``collisions_geometric_*``) always runs. SUMO's check costs about a
+            third of its step time on a dense one-lane sublane road
+            (benchmarks/bench_sumo_options.py); sweeps may turn it off.
         zone_start_m, zone_end_m: Edie measurement zone along the main route, m
             (zone_end_m = 0: up to 100 m before the road's end).
         cross_sections_m: positions of the flow cross-sections, m (empty: zone
@@ -318,6 +323,7 @@ class OutputSpec:
     trajectories: bool = False
     trajectory_every: int = 1
     sumo_detectors: bool = False
+    sumo_collisions: bool = True
     zone_start_m: float = 100.0
     zone_end_m: float = 0.0
     cross_sections_m: tuple[float, ...] = ()
@@ -345,6 +351,20 @@ class Scenario:
     safety: SafetySpec = field(default_factory=SafetySpec)
     obstacle: ObstacleSpec = field(default_factory=ObstacleSpec)
     outputs: OutputSpec = field(default_factory=OutputSpec)
+
+    def __post_init__(self) -> None:
+        ob = self.obstacle
+        if ob.present:
+            back, front = ob.s_m - 0.5 * ob.length_m, ob.s_m + 0.5 * ob.length_m
+            for x in self.network.joints_m():
+                if back - 0.5 <= x <= front + 0.5:
+                    # SUMO keeps the back of a vehicle that never moves at the centre of
+                    # the previous edge's lane and reports phantom collisions there.
+                    raise ConfigError(
+                        f"obstacle ({back:g}..{front:g} m) lies on the joint of two road "
+                        f"edges at s = {x:g} m: move obstacle.s_m or set "
+                        "network.max_edge_length_m (0: one edge)"
+                    )
 
     def with_seed(self, seed: int) -> Scenario:
         return dataclasses.replace(self, scenario=dataclasses.replace(self.scenario, seed=seed))

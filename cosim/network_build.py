@@ -50,7 +50,7 @@ BUILDER_VERSION = 2
 
 KINDS = ("straight", "ring", "onramp", "varying_width", "three_lane", "file")
 
-#: Number of edges of the ring; each is a circular arc drawn with RING_ARC_POINTS segments.
+#: Fewest edges of the ring; each is a circular arc drawn with RING_ARC_POINTS segments.
 RING_EDGES = 4
 RING_ARC_POINTS = 16
 
@@ -96,6 +96,11 @@ class NetworkSpec:
         width_profile: varying_width only: consecutive ``(length_m, width_m)``
             segments, one edge each, in driving order.
         speed_limit_mps: speed limit on every edge.
+        max_edge_length_m: straight and ring roads are split into equal edges no
+            longer than this (0: one edge per road; the ring has at least 4).
+            Vehicles cross the joints unchanged, but SUMO's sublane model works
+            per lane, and on one 2 km lane its step costs about twice as much as
+            on 100 m edges (benchmarks/bench_sumo_options.py).
         net_file: kind ``file``: path to the user's ``.net.xml``.
         route_edges: kind ``file``: edge ids of the main route in driving order.
         ramp_edges: kind ``file`` (optional): edge ids of a ramp route that ends
@@ -112,6 +117,7 @@ class NetworkSpec:
     merge_position_m: float = 500.0
     width_profile: tuple[tuple[float, float], ...] = ()
     speed_limit_mps: float = 40.0
+    max_edge_length_m: float = 100.0
     net_file: str | None = None
     route_edges: tuple[str, ...] = ()
     ramp_edges: tuple[str, ...] = ()
@@ -131,6 +137,9 @@ class NetworkSpec:
                 f"network.kind must be one of {', '.join(KINDS)} (got {self.kind!r})"
             )
         _positive("speed_limit_mps", self.speed_limit_mps)
+        m = self.max_edge_length_m
+        if isinstance(m, bool) or not isinstance(m, int | float) or not math.isfinite(m) or m < 0:
+            raise ConfigError(f"network.max_edge_length_m must be >= 0 (got {m!r})")
         check = {
             "straight": self._validate_straight,
             "three_lane": self._validate_three_lane,
@@ -193,12 +202,23 @@ class NetworkSpec:
         if not self.route_edges:
             raise ConfigError("network.route_edges must list the main route's edges")
 
+    def joints_m(self) -> tuple[float, ...]:
+        """Positions along the road (m) where a built straight road or ring joins two
+        edges (empty for other kinds; ring joints are approximate: SUMO's junctions)."""
+        if self.kind == "straight":
+            n, length = _n_edges(self.length_m, self.max_edge_length_m), self.length_m
+            return tuple(length * k / n for k in range(1, n))
+        if self.kind == "ring":
+            n = _n_edges(self.circumference_m, self.max_edge_length_m, minimum=RING_EDGES)
+            return tuple(self.circumference_m * k / n for k in range(n))
+        return ()
+
     def cache_params(self) -> dict[str, Any]:
         """The parameters that determine the built network for this kind (for the hash)."""
         keys = {
-            "straight": ("length_m", "width_m"),
+            "straight": ("length_m", "width_m", "max_edge_length_m"),
             "three_lane": ("length_m", "width_m"),
-            "ring": ("circumference_m", "width_m"),
+            "ring": ("circumference_m", "width_m", "max_edge_length_m"),
             "onramp": (
                 "length_m", "width_m", "ramp_length_m", "ramp_width_m",
                 "ramp_angle_deg", "merge_position_m",
@@ -390,7 +410,7 @@ def sumo_version() -> str:
     return m.group(1) if m else "unknown"
 
 
-def _run_netconvert(nod: Path, edg: Path, out: Path) -> None:
+def _run_netconvert(nod: Path, edg: Path, out: Path, extra: Sequence[str] = ()) -> None:
     """Run netconvert on plain-XML sources; NetworkError with its first error line on failure."""
     cmd = [
         str(netconvert_binary()),
@@ -400,6 +420,7 @@ def _run_netconvert(nod: Path, edg: Path, out: Path) -> None:
         "--no-turnarounds", "true",
         "--offset.disable-normalization", "true",
         "--output.street-names", "false",
+        *extra,
     ]
     proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
     (out.parent / "netconvert.log").write_text(proc.stdout + proc.stderr)
@@ -424,6 +445,7 @@ class _Sources:
     main_route: tuple[str, ...]
     ramp_route: tuple[str, ...] | None = None
     periodic: bool = False
+    netconvert_options: tuple[str, ...] = ()
 
 
 def _node(nid: str, x: float, y: float, ntype: str = "priority") -> str:
@@ -441,13 +463,34 @@ def _edge(
     )
 
 
+def _n_edges(length_m: float, max_edge_length_m: float, minimum: int = 1) -> int:
+    """How many equal edges split a road of ``length_m`` (m) into pieces <= the maximum."""
+    if max_edge_length_m <= 0:
+        return minimum
+    return max(minimum, math.ceil(length_m / max_edge_length_m - 1e-9))
+
+
 def _sources_straight(spec: NetworkSpec) -> _Sources:
     v = spec.speed_limit_mps
-    return _Sources(
-        nodes=[_node("start", 0.0, 0.0, "dead_end"), _node("end", spec.length_m, 0.0, "dead_end")],
-        edges=[_edge("main", "start", "end", spec.width_m, v)],
-        main_route=("main",),
-    )
+    n = _n_edges(spec.length_m, spec.max_edge_length_m)
+    if n == 1:
+        return _Sources(
+            nodes=[_node("start", 0.0, 0.0, "dead_end"),
+                   _node("end", spec.length_m, 0.0, "dead_end")],
+            edges=[_edge("main", "start", "end", spec.width_m, v)],
+            main_route=("main",),
+        )
+    names = ["start", *(f"j{k}" for k in range(1, n)), "end"]
+    nodes = [
+        _node(name, spec.length_m * k / n, 0.0, "dead_end" if k in (0, n) else "priority")
+        for k, name in enumerate(names)
+    ]
+    route = tuple(f"main{k}" for k in range(n))
+    edges = [_edge(route[k], names[k], names[k + 1], spec.width_m, v) for k in range(n)]
+    # Without internal links vehicles step straight from one edge onto the next; with
+    # them every joint would add a 0.1 m junction lane (SUMO's minimum lane length).
+    return _Sources(nodes=nodes, edges=edges, main_route=route,
+                    netconvert_options=("--no-internal-links", "true"))
 
 
 def _sources_three_lane(spec: NetworkSpec) -> _Sources:
@@ -460,7 +503,7 @@ def _sources_three_lane(spec: NetworkSpec) -> _Sources:
 
 
 def _sources_ring(spec: NetworkSpec) -> _Sources:
-    n = RING_EDGES
+    n = _n_edges(spec.circumference_m, spec.max_edge_length_m, minimum=RING_EDGES)
     # The lanes are polygons of n * RING_ARC_POINTS chords; scale the radius so that the
     # polygon (what SUMO measures), not the circle, has the requested circumference.
     half_angle = math.pi / (n * RING_ARC_POINTS)
@@ -573,7 +616,7 @@ def _build_into(target: Path, spec: NetworkSpec, sources: _Sources) -> None:
         nod, edg = tmp / "road.nod.xml", tmp / "road.edg.xml"
         nod.write_text("<nodes>\n" + "\n".join(sources.nodes) + "\n</nodes>\n")
         edg.write_text("<edges>\n" + "\n".join(sources.edges) + "\n</edges>\n")
-        _run_netconvert(nod, edg, tmp / NET_FILE_NAME)
+        _run_netconvert(nod, edg, tmp / NET_FILE_NAME, sources.netconvert_options)
         meta = {"spec": asdict(spec), "sumo": sumo_version(), "builder": BUILDER_VERSION}
         (tmp / SPEC_FILE_NAME).write_text(json.dumps(meta, indent=2, sort_keys=True))
         try:

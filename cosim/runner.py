@@ -133,7 +133,7 @@ def _run_in(sc: Scenario, work: Path, out_dir: Path | None, gui: bool,
     args = [
         "-r", str(routes.path),
         "--step-length", str(run.step_length_s),
-        "--collision.action", "warn",
+        "--collision.action", "warn" if sc.outputs.sumo_collisions else "none",
         "--collision.mingap-factor", "0",
         "--seed", str(run.seed),
         "--begin", "0",
@@ -326,6 +326,9 @@ def _loop(sc, net, world: SumoWorld, routes, zone, xs, progress: bool) -> RunRes
             "teleports": world.teleports(),
         }
     )
+    if not sc.outputs.sumo_collisions:  # not checked: missing, not zero
+        for key in ("collisions_sumo_cav", "collisions_sumo_hdv_only"):
+            summary[key] = None
     summary.update(safety.counts.as_dict())
     for name, rate in controller.clip_stats().items():
         summary[f"clip_rate_{name}"] = rate

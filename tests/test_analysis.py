@@ -44,7 +44,8 @@ def sweep_dir(tmp_path):
                     "edie_flow_vph": q, "edie_density_vpkm": q / (3.6 * v),
                     "space_mean_speed_mps": v,
                     "collisions_sumo_cav": int(share == 1.0 and demand == 3000.0),
-                    "collisions_geometric_cav": 0, "teleports": 0,
+                    "collisions_geometric_cav": 2 * int(share == 1.0 and demand == 3000.0),
+                    "teleports": 0,
                     "min_gap_m": 10.0 - demand / 1000.0 + seed, "min_side_clearance_m": 0.5,
                     "median_time_headway_s": 1.0 + seed, "p05_time_headway_s": 0.5 * seed,
                     "boundary_vehicle_steps": seed, "boundary_vehicle_steps_cav": 0,
@@ -144,7 +145,9 @@ def test_safety_boundary_and_flock_aggregate_over_seeds(sweep_dir):
     res = an.load_results(sweep_dir)
     s = an.safety_table(res).set_index(["demand.cav_share", "demand.inflow_vph"])
     assert s.loc[(1.0, 3000.0), "collisions_sumo_cav_sum"] == 3
-    assert s.loc[(1.0, 3000.0), "collisions_cav_per_1e6_vehicle_steps"] == pytest.approx(1000.0)
+    assert s.loc[(1.0, 3000.0), "collisions_geometric_cav_sum"] == 6
+    # geometric events: 6 over 3 runs x 1000 vehicle-steps
+    assert s.loc[(1.0, 3000.0), "collisions_cav_per_1e6_vehicle_steps"] == pytest.approx(2000.0)
     assert s.loc[(0.0, 1000.0), "min_gap_m_min"] == pytest.approx(10.0)
     assert s.loc[(0.0, 1000.0), "median_time_headway_s_mean"] == pytest.approx(3.0)
     b = an.boundary_table(res).set_index(["demand.cav_share", "demand.inflow_vph"])

@@ -74,7 +74,7 @@ def assert_one_error_line(proc, *fragments: str) -> str:
 @pytest.fixture(scope="module")
 def straight_net_xml(tmp_path_factory) -> str:
     """Text of a valid 300 m straight .net.xml (built by netconvert, no SUMO run)."""
-    net = build_network(NetworkSpec(kind="straight", length_m=300.0),
+    net = build_network(NetworkSpec(kind="straight", length_m=300.0, max_edge_length_m=0.0),
                         cache_dir=tmp_path_factory.mktemp("nets"))
     return net.net_file.read_text()
 
@@ -335,3 +335,18 @@ def test_builtin_scenarios_round_trip_through_config_toml(name):
     sc = load_scenario(builtin_scenarios()[name])
     again = scenario_from_dict(tomllib.loads(dumps_toml(sc.to_dict())))
     assert again == sc
+
+
+def test_an_obstacle_on_an_edge_joint_is_refused_in_one_line():
+    """A stopped vehicle across the joint of two 100 m edges makes SUMO report phantom
+    collisions: the scenario is refused, naming both ways out."""
+    data = {"network": {"kind": "straight", "length_m": 1000.0},
+            "obstacle": {"s_m": 500.0, "length_m": 5.0, "width_m": 2.0}}
+    with pytest.raises(ConfigError, match="joint") as err:
+        scenario_from_dict(data)
+    assert "max_edge_length_m" in str(err.value) and "\n" not in str(err.value)
+    data["obstacle"]["s_m"] = 550.0
+    assert scenario_from_dict(data).obstacle.s_m == 550.0
+    data["obstacle"]["s_m"] = 500.0
+    data["network"]["max_edge_length_m"] = 0.0  # one edge: no joint
+    assert scenario_from_dict(data).network.joints_m() == ()

@@ -12,6 +12,7 @@ from controllers.neighbours import (
     neighbour_pairs_dense,
     neighbour_pairs_tree,
     scatter_add,
+    strip_cross_pairs,
 )
 from controllers.observation import Observation
 from controllers.params import FlockingParams
@@ -177,6 +178,30 @@ def test_cross_pairs_match_brute_force(period):
                 want.add((i, k))
     assert got == want
     assert len(want) > 0
+
+
+def _brute_cross(x, y, radius, period):
+    dq = y[None, :, :] - x[:, None, :]
+    if period is not None:
+        dq[..., 0] = (dq[..., 0] + 0.5 * period) % period - 0.5 * period
+    i, k = np.nonzero(np.linalg.norm(dq, axis=-1) < radius)
+    return {(int(a), int(b)) for a, b in zip(i, k, strict=True)}
+
+
+@pytest.mark.parametrize("period", [None, 500.0])
+def test_strip_search_on_a_road_matches_brute_force_and_the_tree(period):
+    """Road-like sets (10 m wide, radius 40 m) take the strip path: exact pairs."""
+    rng = np.random.default_rng(11)
+    for _ in range(30):
+        x = np.column_stack([rng.uniform(0, 500, 40), rng.uniform(-5, 5, 40)])
+        y = np.column_stack([rng.uniform(0, 500, 60), rng.uniform(-5, 5, 60)])
+        y[0] = x[0] + [40.0, 0.0]  # exactly at the radius: excluded (strict <)
+        want = _brute_cross(x, y, 40.0, period)
+        strip = strip_cross_pairs(x, y, 40.0, period)
+        assert {tuple(p) for p in strip} == want
+        assert (0, 0) not in want
+        assert np.all(np.diff(strip[:, 0]) >= 0)  # grouped by i
+        assert {tuple(p) for p in cross_pairs(x, y, 40.0, period)} == want
 
 
 def test_cross_pairs_with_an_empty_set_is_empty():

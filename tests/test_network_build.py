@@ -53,10 +53,11 @@ def run_python(code: str, timeout: float = 60.0) -> dict:
 
 
 def test_straight_road_is_one_wide_lane_of_given_length(cache: Path) -> None:
-    net = build_network(NetworkSpec(kind="straight", length_m=200.0), cache)
+    net = build_network(NetworkSpec(kind="straight", length_m=200.0, max_edge_length_m=0.0),
+                        cache)
     sumo_net = _read(net.net_file)
     edges = sumo_net.getEdges(withInternal=False)
-    assert [e.getID() for e in edges] == list(net.main_route)
+    assert [e.getID() for e in edges] == list(net.main_route) == ["main"]
     lanes = edges[0].getLanes()
     assert len(lanes) == 1
     assert lanes[0].getWidth() == pytest.approx(10.2)
@@ -66,6 +67,31 @@ def test_straight_road_is_one_wide_lane_of_given_length(cache: Path) -> None:
     np.testing.assert_allclose(right, -5.1)
     np.testing.assert_allclose(left, 5.1)
     assert not net.periodic
+
+
+def test_long_straight_road_is_split_into_edges_no_longer_than_the_maximum(cache: Path) -> None:
+    net = build_network(NetworkSpec(kind="straight", length_m=1050.0), cache)  # default 100 m
+    sumo_net = _read(net.net_file)
+    edges = sumo_net.getEdges(withInternal=False)
+    assert len(net.main_route) == 11
+    assert {e.getID() for e in edges} == set(net.main_route)
+    lengths = [sumo_net.getEdge(e).getLanes()[0].getLength() for e in net.main_route]
+    assert max(lengths) <= 100.0 + 0.01
+    assert all(len(sumo_net.getEdge(e).getLanes()) == 1 for e in net.main_route)
+    assert all(sumo_net.getEdge(e).getLanes()[0].getWidth() == pytest.approx(10.2)
+               for e in net.main_route)
+    assert net.length_m == pytest.approx(1050.0, abs=0.05)  # joints add no length
+    # s is continuous along the route: each edge starts where the previous one ended
+    starts = [net.s_of(e, 0.0) for e in net.main_route]
+    assert starts[0] == 0.0 and np.all(np.diff(starts) > 90.0)
+    with pytest.raises(ConfigError, match="max_edge_length_m"):
+        NetworkSpec(kind="straight", max_edge_length_m=-1.0)
+
+
+def test_ring_edges_follow_the_maximum_edge_length(cache: Path) -> None:
+    net = build_network(NetworkSpec(kind="ring", circumference_m=1000.0), cache)
+    assert len(net.main_route) == 10
+    assert abs(net.length_m - 1000.0) / 1000.0 < 0.01
 
 
 def test_ring_circumference_within_one_percent(cache: Path) -> None:
@@ -123,6 +149,54 @@ def test_ring_vehicle_circles_and_s_wraps_continuously(cache: Path, tmp_path: Pa
     assert out["laps"] >= 2  # passed s = 0 at least twice
     assert out["worst"] < 1e-6  # s advances by exactly v*dt, across junctions and the wrap
     assert out["unwrapped"] == pytest.approx(out["sumo_dist"], abs=1e-6)
+
+
+@pytest.mark.sumo
+def test_vehicles_cross_the_joints_of_a_split_road_unchanged(cache: Path, tmp_path: Path) -> None:
+    """Sublane vehicle on a 600 m road of 100 m edges: s advances by exactly v*dt and the
+    lateral offset stays put across every joint."""
+    spec = NetworkSpec(kind="straight", length_m=600.0)
+    net = build_network(spec, cache)
+    rou = tmp_path / "r.rou.xml"
+    rou.write_text(
+        "<routes>\n"
+        '  <vType id="car" speedDev="0" laneChangeModel="SL2015" latAlignment="arbitrary"/>\n'
+        f'  <route id="r" edges="{" ".join(net.main_route)}"/>\n'
+        '  <vehicle id="v" type="car" route="r" depart="0" departPos="5" '
+        'departSpeed="25" departPosLat="3.1"/>\n'
+        "</routes>\n"
+    )
+    out = run_python(f"""
+        import json
+        import libsumo as t
+        from cosim.network_build import NetworkSpec, build_network
+        net = build_network(NetworkSpec(kind="straight", length_m=600.0), {str(cache)!r})
+        t.start(["sumo", "-n", str(net.net_file), "-r", {str(rou)!r}, "--no-step-log", "true",
+                 "--lateral-resolution", "0.8", "--step-length", "0.1"])
+        t.simulationStep()
+        t.vehicle.setLaneChangeMode("v", 0)
+        prev = net.s_of(t.vehicle.getLaneID("v"), t.vehicle.getLanePosition("v"))
+        worst, lat_dev, edges = 0.0, 0.0, set()
+        while "v" in t.vehicle.getIDList():
+            v = t.vehicle.getSpeed("v")
+            t.simulationStep()
+            if "v" not in t.vehicle.getIDList():
+                break
+            lane = t.vehicle.getLaneID("v")
+            s = net.s_of(lane, t.vehicle.getLanePosition("v"))
+            worst = max(worst, abs(s - prev - 0.1 * t.vehicle.getSpeed("v")))
+            d = net.d_of(lane, t.vehicle.getLateralLanePosition("v"))
+            lat_dev = max(lat_dev, abs(d - 3.1))
+            edges.add(t.vehicle.getRoadID("v"))
+            prev = s
+        print(json.dumps({{"worst": worst, "lat_dev": lat_dev, "end_s": prev,
+                          "n_edges": len([e for e in edges if not e.startswith(":")])}}))
+        t.close()
+    """)
+    assert out["n_edges"] == 6
+    assert out["end_s"] > 590.0
+    assert out["worst"] < 1e-6
+    assert out["lat_dev"] < 1e-6
 
 
 def test_onramp_offsets_increase_along_the_main_route(cache: Path) -> None:
@@ -293,7 +367,8 @@ def test_bad_specs_raise_config_error_naming_the_field(kwargs: dict, field: str)
 
 
 def test_user_network_file(cache: Path, tmp_path: Path) -> None:
-    built = build_network(NetworkSpec(kind="straight", length_m=200.0, width_m=7.0), cache)
+    built = build_network(NetworkSpec(kind="straight", length_m=200.0, width_m=7.0,
+                                      max_edge_length_m=0.0), cache)
     mine = tmp_path / "mine.net.xml"
     mine.write_bytes(built.net_file.read_bytes())
     net = build_network(NetworkSpec(kind="file", net_file=str(mine), route_edges=("main",)))
@@ -316,7 +391,8 @@ def test_user_network_file_errors(tmp_path: Path) -> None:
 
 
 def test_user_network_unknown_edge(cache: Path) -> None:
-    built = build_network(NetworkSpec(kind="straight", length_m=200.0), cache)
+    built = build_network(NetworkSpec(kind="straight", length_m=200.0, max_edge_length_m=0.0),
+                          cache)
     with pytest.raises(NetworkError, match="'nowhere'"):
         build_network(
             NetworkSpec(kind="file", net_file=str(built.net_file), route_edges=("main", "nowhere"))

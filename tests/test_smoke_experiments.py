@@ -39,7 +39,9 @@ def test_plane_reproduction_command_writes_outputs(tmp_path, name):
 
 
 @pytest.mark.sumo
-@pytest.mark.parametrize("sweep", ["open_road_capacity", "ring_fd", "baselines", "capacity_quick"])
+@pytest.mark.parametrize(
+    "sweep", ["open_road_capacity", "ring_fd", "baselines", "capacity_quick", "capacity_hdv5"]
+)
 def test_shipped_sweep_smoke_runs_every_point_ok(tmp_path, sweep):
     out = tmp_path / sweep
     _run([sys.executable, "-m", "cosim.cli", "sweep", sweep, "--smoke", "--out", str(out),

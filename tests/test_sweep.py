@@ -183,14 +183,17 @@ def test_base_scenario_by_name_and_by_relative_path(tmp_path):
 @pytest.mark.parametrize("name, n_full, n_smoke", [
     ("open_road_capacity", 13 * 5 * 3, 6),
     ("ring_fd", 8 * 5 * 5, 6),
-    ("baselines", 2 * 13 * 3, 4),
+    ("baselines", 3 * 13 * 3, 6),
+    ("capacity_hdv5", 3 * 2 * 3, 1),
 ])
 def test_shipped_sweeps_validate(name, n_full, n_smoke):
     full = sw.load_sweep(name)
     smoke = sw.load_sweep(name, smoke=True)
     assert len(full.points) == n_full and len(smoke.points) == n_smoke
     shares = {p.scenario.demand.cav_share for p in full.points}
-    assert shares == ({0.0} if name == "baselines" else {0.0, 0.25, 0.5, 0.75, 1.0})
+    want = {"baselines": {0.0}, "capacity_hdv5": {1.0, 0.95}}.get(
+        name, {0.0, 0.25, 0.5, 0.75, 1.0})
+    assert shares == want
     assert all(p.scenario.scenario.duration_s <= 40.0 for p in smoke.points)
     if name == "ring_fd":
         assert {p.scenario.network.circumference_m for p in full.points} == {1000.0}
@@ -199,7 +202,8 @@ def test_shipped_sweeps_validate(name, n_full, n_smoke):
         assert {p.scenario.network.length_m for p in full.points} == {2000.0}
         assert {p.scenario.network.width_m for p in full.points} == {10.2}
         levels = sorted({p.scenario.demand.inflow_vph for p in full.points})
-        assert levels[0] == 2000.0 and levels[-1] == 14000.0
+        want_levels = (12000.0, 16000.0) if name == "capacity_hdv5" else (2000.0, 14000.0)
+        assert (levels[0], levels[-1]) == want_levels
     if name == "baselines":
         assert {p.scenario.network.kind for p in full.points} == {"straight", "three_lane"}
 

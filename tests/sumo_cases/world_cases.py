@@ -64,7 +64,8 @@ def _routes(vehicles: list[tuple[str, float, float, float]]) -> Path:
 
 
 def _straight_world(vehicles, length_m: float = 300.0) -> SumoWorld:
-    net = build_network(NetworkSpec(kind="straight", length_m=length_m))
+    # one edge: departPos in _routes counts from the road's start
+    net = build_network(NetworkSpec(kind="straight", length_m=length_m, max_edge_length_m=0.0))
     world = SumoWorld(net, ["-r", str(_routes(vehicles)), *SUMO_OPTS])
     world.start()
     world.step()
