@@ -550,6 +550,10 @@ def _add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--times", type=float, nargs="+", metavar="T",
                    help="top views at these times, s (default: 3 spread over the run)")
     p.add_argument("--confidence", type=float, default=0.95, help="CI level (default 0.95)")
+    p.add_argument("--animate", action="store_true",
+                   help="one run's folder: also an animated top view, top_view.gif")
+    p.add_argument("--t-range", type=float, nargs=2, metavar=("T0", "T1"),
+                   help="time span of the animation, s (default: the last 30 s)")
     p.set_defaults(func=cmd_analyse)
 
 
@@ -575,7 +579,10 @@ def cmd_analyse(ns: argparse.Namespace) -> int:
         if not (root / "trajectories.csv").is_file():
             raise ConfigError(f"{root}: no trajectories.csv to draw "
                               "(run with [outputs] trajectories = true)")
-        for p in plot_run(root, out, times=ns.times):
+        t_range = tuple(ns.t_range) if ns.t_range else None
+        if t_range is not None and not t_range[0] < t_range[1]:
+            raise ConfigError(f"--t-range must be increasing (got {t_range[0]:g} {t_range[1]:g})")
+        for p in plot_run(root, out, times=ns.times, animate=ns.animate, t_range=t_range):
             print(f"figure: {p}")
         return 0
     a = analyse(root, ns.out, figures=not ns.no_figures, confidence=ns.confidence,

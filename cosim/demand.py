@@ -327,7 +327,9 @@ def _open_stream(
     slotted = demand.insertion == "slots" and origin == "main" and net.n_lanes == 1 and n > 0
     if slotted:
         lengths = np.array([demand.size_classes[c][0] for c in cls])
-        times, lat, v_depart = _slot_schedule(times, road_width, widths, lengths, speed, demand)
+        taus = np.where(is_cav, CAV_TAU_S, HDV_TAU_S)
+        times, lat, v_depart = _slot_schedule(times, road_width, widths, lengths, speed, demand,
+                                              taus)
     out = []
     for i in range(n):
         kind = CAV_PREFIX if is_cav[i] else HDV_PREFIX
@@ -350,8 +352,8 @@ def _open_stream(
 
 
 def _slot_schedule(times: np.ndarray, road_width: float, widths: np.ndarray,
-                   lengths: np.ndarray, speeds: np.ndarray,
-                   demand: DemandSpec) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   lengths: np.ndarray, speeds: np.ndarray, demand: DemandSpec,
+                   taus: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Departure times (s), lateral offsets (m) and depart speeds (m/s) for slot insertion.
 
     Slots are ``slot_spacing_m`` apart, centred on the road, as many as fit with
@@ -359,8 +361,10 @@ def _slot_schedule(times: np.ndarray, road_width: float, widths: np.ndarray,
     depart earliest; it departs no earlier than ``slot_headway_s`` after the
     slot's previous vehicle, at no more than that vehicle's depart speed (it
     then accelerates to its desired speed), and only once the gap is at least
-    ``s0 + v tau`` (standstill gap plus one reaction time of travel). Later
-    departures are a queue, as at SUMO's own insertion. Deterministic.
+    ``s0 + v tau`` (standstill gap plus the vehicle's own reaction time ``taus``
+    (s) of travel: its vType's ``tau``, 0.5 s for CAVs and 1 s for human
+    drivers). Later departures are a queue, as at SUMO's own insertion.
+    Deterministic.
     """
     room = road_width - float(widths.max()) - 2 * DEPART_EDGE_MARGIN_M
     k = max(1, int(room // demand.slot_spacing_m) + 1)
@@ -373,10 +377,10 @@ def _slot_schedule(times: np.ndarray, road_width: float, widths: np.ndarray,
     out_v = np.empty(len(times))
     last_v[:] = np.inf
     t_prev = -np.inf
-    tau, s0 = 1.0, MIN_GAP_M
+    s0 = MIN_GAP_M
     for n, t in enumerate(times):
         v = np.minimum(float(speeds[n]), last_v)  # never faster than the slot's leader
-        need = s0 + v * tau + last_len
+        need = s0 + v * float(taus[n]) + last_len
         earliest = np.maximum(last_t + demand.slot_headway_s,
                               last_t + need / np.where(np.isfinite(last_v), last_v, 1.0))
         earliest = np.maximum(earliest, max(float(t), t_prev))

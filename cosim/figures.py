@@ -259,40 +259,13 @@ def plot_top_view(
     if times is None:
         times = [steps[int(q * (len(steps) - 1))] for q in (0.25, 0.5, 0.75)]
     picks = [float(steps[np.abs(steps - tq).argmin()]) for tq in times]
-    if s_range is None:
-        mid = tr[tr["t_s"] == picks[len(picks) // 2]]
-        lo_all, hi_all = float(tr["s_m"].min()), float(tr["s_m"].max())
-        if hi_all - lo_all <= window_m:
-            s_range = (lo_all - 5.0, hi_all + 5.0)
-        else:
-            c = float(mid["s_m"].median()) if len(mid) else 0.5 * (lo_all + hi_all)
-            s_range = (c - window_m / 2, c + window_m / 2)
-    s_grid = np.linspace(s_range[0], s_range[1], 400)
-    if edges is not None:
-        right, left = edges(s_grid)
-        y_lo, y_hi = float(np.min(right)) - 1.0, float(np.max(left)) + 1.0
-    else:
-        y_lo = float((tr["d_m"] - tr["width_m"] / 2).min()) - 1.0
-        y_hi = float((tr["d_m"] + tr["width_m"] / 2).max()) + 1.0
+    s_range, s_grid, (y_lo, y_hi) = _view_window(tr, picks[len(picks) // 2], s_range, edges,
+                                                 window_m)
     fig, axes = plt.subplots(len(picks), 1, figsize=(12, 0.9 + 1.5 * len(picks)),
                              squeeze=False)
     for ax, tq in zip(axes[:, 0], picks, strict=True):
-        now = tr[(tr["t_s"] == tq) & tr["s_m"].between(s_range[0] - 10, s_range[1] + 10)]
-        rects, colours = [], []
-        for row in now.itertuples(index=False):
-            rects.append(Rectangle((row.s_m - row.length_m / 2, row.d_m - row.width_m / 2),
-                                   row.length_m, row.width_m))
-            colours.append(CAV_COLOUR if bool(row.is_cav) else HDV_COLOUR)
-        ax.add_collection(PatchCollection(rects, facecolors=colours, edgecolors="k",
-                                          linewidths=0.3))
-        if edges is not None:
-            ax.plot(s_grid, right, color="k", linewidth=1.2)
-            ax.plot(s_grid, left, color="k", linewidth=1.2)
-        for y in lane_lines:
-            ax.axhline(y, color="0.5", linestyle="--", linewidth=0.8)
-        ax.set_xlim(*s_range)
-        ax.set_ylim(y_lo, y_hi)
-        ax.set_ylabel("d, m")
+        _draw_road(ax, s_grid, edges, lane_lines, s_range, (y_lo, y_hi))
+        _draw_vehicles(ax, tr[tr["t_s"] == tq], s_range)
         ax.text(0.005, 0.95, f"t = {tq:.1f} s", transform=ax.transAxes, va="top",
                 fontsize=8, bbox={"facecolor": "white", "alpha": 0.7, "linewidth": 0})
     axes[-1, 0].set_xlabel("s, m (lateral axis stretched)")
@@ -302,6 +275,121 @@ def plot_top_view(
     axes[0, 0].legend(handles=handles, loc="upper right", fontsize=7, ncol=3)
     fig.suptitle(title or "Top view")
     return _save(fig, out_path)
+
+
+def _view_window(tr: pd.DataFrame, t_mid: float, s_range, edges: Edges | None,
+                 window_m: float):
+    """(s_range, s_grid, (y_lo, y_hi)) of a top view: ``window_m`` (m) around the median
+    vehicle at ``t_mid`` (s), or the whole road if shorter; lateral limits from the road
+    edges (or the vehicles)."""
+    if s_range is None:
+        mid = tr[tr["t_s"] == t_mid]
+        lo_all, hi_all = float(tr["s_m"].min()), float(tr["s_m"].max())
+        if hi_all - lo_all <= window_m:
+            s_range = (lo_all - 5.0, hi_all + 5.0)
+        else:
+            c = float(mid["s_m"].median()) if len(mid) else 0.5 * (lo_all + hi_all)
+            s_range = (c - window_m / 2, c + window_m / 2)
+    s_grid = np.linspace(s_range[0], s_range[1], 400)
+    if edges is not None:
+        right, left = edges(s_grid)
+        y_lims = (float(np.min(right)) - 1.0, float(np.max(left)) + 1.0)
+    else:
+        y_lims = (float((tr["d_m"] - tr["width_m"] / 2).min()) - 1.0,
+                  float((tr["d_m"] + tr["width_m"] / 2).max()) + 1.0)
+    return s_range, s_grid, y_lims
+
+
+def _draw_road(ax, s_grid, edges: Edges | None, lane_lines, s_range, y_lims) -> None:
+    if edges is not None:
+        right, left = edges(s_grid)
+        ax.plot(s_grid, right, color="k", linewidth=1.2)
+        ax.plot(s_grid, left, color="k", linewidth=1.2)
+    for y in lane_lines:
+        ax.axhline(y, color="0.5", linestyle="--", linewidth=0.8)
+    ax.set_xlim(*s_range)
+    ax.set_ylim(*y_lims)
+    ax.set_ylabel("d, m")
+
+
+def _draw_vehicles(ax, now: pd.DataFrame, s_range) -> PatchCollection:
+    """Vehicles of one instant as rectangles (CAVs blue, HDVs orange); the collection."""
+    now = now[now["s_m"].between(s_range[0] - 10, s_range[1] + 10)]
+    rects = [Rectangle((r.s_m - r.length_m / 2, r.d_m - r.width_m / 2), r.length_m, r.width_m)
+             for r in now.itertuples(index=False)]
+    colours = np.where(now["is_cav"].to_numpy(bool), CAV_COLOUR, HDV_COLOUR)
+    return ax.add_collection(PatchCollection(rects, facecolors=list(colours), edgecolors="k",
+                                             linewidths=0.3))
+
+
+def animate_top_view(
+    traj: pd.DataFrame | str | Path,
+    out_path: str | Path,
+    t_range: tuple[float, float] | None = None,
+    every_s: float = 0.5,
+    fps: int = 10,
+    s_range: tuple[float, float] | None = None,
+    edges: Edges | None = None,
+    lane_lines: Sequence[float] = (),
+    title: str | None = None,
+    window_m: float = 300.0,
+) -> Path:
+    """Animated top view (GIF): the road window from above, one frame per ``every_s``.
+
+    Args:
+        traj: trajectories (as for :func:`plot_top_view`) or a path.
+        t_range: (start, end) of the animation, s; default the last 30 s recorded.
+        every_s: simulated time between frames, s (the nearest recorded steps).
+        fps: frames per second of the GIF (real time at ``every_s * fps = 1``).
+        s_range, edges, lane_lines, window_m: as for :func:`plot_top_view`.
+    """
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    tr = _read_traj(traj)
+    steps = np.unique(tr["t_s"].to_numpy(float))
+    if len(steps) == 0:
+        raise ValueError("trajectories are empty")
+    if every_s <= 0 or fps <= 0:
+        raise ValueError("every_s and fps must be > 0")
+    if t_range is None:
+        t_range = (max(float(steps[0]), float(steps[-1]) - 30.0), float(steps[-1]))
+    wanted = np.arange(t_range[0], t_range[1] + 1e-9, every_s)
+    k = np.clip(np.searchsorted(steps, wanted), 1, max(len(steps) - 1, 1))
+    if len(steps) > 1:  # the nearer of the recorded steps either side
+        k = np.where(np.abs(steps[k - 1] - wanted) <= np.abs(steps[k] - wanted), k - 1, k)
+    else:
+        k = np.zeros(len(wanted), dtype=int)
+    frames = np.unique(steps[k])
+    frames = frames[(frames >= t_range[0] - every_s) & (frames <= t_range[1] + every_s)]
+    if len(frames) == 0:
+        raise ValueError(f"no recorded step in t_range {t_range}")
+    s_range, s_grid, y_lims = _view_window(tr, float(frames[len(frames) // 2]), s_range,
+                                           edges, window_m)
+    by_t = dict(tuple(tr.groupby("t_s")))
+    fig, ax = plt.subplots(figsize=(12, 2.4))
+    _draw_road(ax, s_grid, edges, lane_lines, s_range, y_lims)
+    ax.set_xlabel("s, m (lateral axis stretched)")
+    handles = [Patch(color=CAV_COLOUR, label="CAV"), Patch(color=HDV_COLOUR, label="HDV")]
+    ax.legend(handles=handles, loc="upper right", fontsize=7, ncol=2)
+    ax.set_title(title or "Top view")
+    label = ax.text(0.005, 0.95, "", transform=ax.transAxes, va="top", fontsize=8,
+                    bbox={"facecolor": "white", "alpha": 0.7, "linewidth": 0})
+    drawn: list = []
+
+    def update(t):
+        for artist in drawn:
+            artist.remove()
+        drawn.clear()
+        drawn.append(_draw_vehicles(ax, by_t.get(t, tr.iloc[:0]), s_range))
+        label.set_text(f"t = {t:.1f} s")
+        return [*drawn, label]
+
+    anim = FuncAnimation(fig, update, frames=list(frames), blit=False)
+    out = Path(out_path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    anim.save(out, writer=PillowWriter(fps=fps), dpi=80)
+    plt.close(fig)
+    return out
 
 
 def road_geometry(network: dict) -> tuple[Edges | None, list[float], float | None]:
@@ -339,8 +427,11 @@ def plot_run(
     out_dir: str | Path | None = None,
     times: Sequence[float] | None = None,
     prefix: str = "",
+    animate: bool = False,
+    t_range: tuple[float, float] | None = None,
 ) -> list[Path]:
-    """Time-space diagram and top view of one run folder (needs trajectories.csv)."""
+    """Time-space diagram and top view of one run folder (needs trajectories.csv);
+    with ``animate`` also ``top_view.gif`` over ``t_range`` (s; default the last 30 s)."""
     run_dir = Path(run_dir)
     out = Path(out_dir) if out_dir is not None else run_dir / "figures"
     tr = _read_traj(run_dir / "trajectories.csv")
@@ -349,12 +440,16 @@ def plot_run(
         network = tomllib.loads((run_dir / "config.toml").read_text()).get("network", {})
     edges, lanes, period = road_geometry(network)
     name = run_dir.name
-    return [
+    files = [
         plot_time_space(tr, out / f"{prefix}time_space.png", period=period,
                         title=f"Time-space diagram: {name}"),
         plot_top_view(tr, out / f"{prefix}top_view.png", times=times, edges=edges,
                       lane_lines=lanes, title=f"Top view: {name}"),
     ]
+    if animate:
+        files.append(animate_top_view(tr, out / f"{prefix}top_view.gif", t_range=t_range,
+                                      edges=edges, lane_lines=lanes, title=f"Top view: {name}"))
+    return files
 
 
 def _read_traj(traj) -> pd.DataFrame:

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pandas as pd
@@ -237,3 +239,33 @@ def test_run_figures_on_a_ring(tmp_path):
     assert all(p.read_bytes()[:8] == PNG for p in paths)
     assert fg.series_label(["demand.cav_share", "controller.kind", "network.width_m"],
                            [0.25, "flocking", 8.0]) == "CAV 25% flocking width_m=8"
+
+
+def test_animated_top_view_has_one_frame_per_interval_and_vehicles_move(tmp_path):
+    from PIL import Image, ImageChops
+
+    run = tmp_path / "run"
+    run.mkdir()
+    _trajectory_run(run)
+    paths = fg.plot_run(run, tmp_path / "figs", animate=True, t_range=(2.0, 8.0))
+    gif = paths[-1]
+    assert gif.name == "top_view.gif" and gif.read_bytes()[:6] == b"GIF89a"
+    with Image.open(gif) as im:
+        assert im.n_frames == 13  # 2.0, 2.5, ..., 8.0 s
+        im.seek(0)
+        first = im.convert("RGB")
+        im.seek(12)
+        last = im.convert("RGB")
+    assert ImageChops.difference(first, last).getbbox() is not None  # the cars moved
+
+
+def test_animate_refuses_a_backwards_time_range(tmp_path):
+    run = tmp_path / "run"
+    run.mkdir()
+    _trajectory_run(run)
+    pd.DataFrame([{"edie_flow_vph": 1.0}]).to_csv(run / "summary.csv", index=False)
+    proc = subprocess.run([sys.executable, "-m", "cosim.cli", "analyse", str(run), "--animate",
+                           "--t-range", "8", "2"], capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert "--t-range must be increasing" in proc.stderr
+    assert "Traceback" not in proc.stderr

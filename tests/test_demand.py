@@ -338,25 +338,32 @@ def test_bad_detector_period(straight: RoadNetwork, tmp_path: Path) -> None:
 def test_slot_insertion_keeps_headway_and_never_departs_faster_than_the_slot_leader(tmp_path):
     """Slot insertion: in each lateral slot, departures are at least slot_headway_s apart,
     the follower's depart speed is at most its slot leader's, and the gap at departure is
-    at least s0 + v * 1 s."""
+    at least s0 + v * tau with the follower's own tau (CAV 0.5 s, human 1 s)."""
     import xml.etree.ElementTree as ET
 
-    from cosim.demand import MIN_GAP_M, DemandSpec, write_routes
+    from cosim.demand import CAV_TAU_S, HDV_TAU_S, MIN_GAP_M, DemandSpec, write_routes
     from cosim.network_build import NetworkSpec, build_network
 
     net = build_network(NetworkSpec(kind="straight", length_m=300.0), cache_dir=tmp_path)
-    demand = DemandSpec(inflow_vph=12000.0, duration_s=120.0, cav_share=1.0)
+    demand = DemandSpec(inflow_vph=16000.0, duration_s=120.0, cav_share=0.5,
+                        slot_headway_s=0.6)
     info = write_routes(net, demand, 7, tmp_path / "r.rou.xml")
     root = ET.parse(info.path).getroot()
     lengths = {v.get("id"): float(v.get("length")) for v in root.iter("vType")}
     by_slot: dict = {}
     for v in root.iter("vehicle"):
         by_slot.setdefault(v.get("departPosLat"), []).append(
-            (float(v.get("depart")), float(v.get("departSpeed")), lengths[v.get("type")])
+            (float(v.get("depart")), float(v.get("departSpeed")), lengths[v.get("type")],
+             CAV_TAU_S if v.get("type").startswith("cav") else HDV_TAU_S)
         )
     assert len(by_slot) == 4  # 10.2 m road, slots 2.55 m apart
+    tight = {CAV_TAU_S: 0, HDV_TAU_S: 0}
     for rows in by_slot.values():
-        for (t0, v0, l0), (t1, v1, _) in zip(rows, rows[1:], strict=False):
+        for (t0, v0, l0, _), (t1, v1, _, tau1) in zip(rows, rows[1:], strict=False):
             assert t1 - t0 >= demand.slot_headway_s - 0.011
             assert v1 <= v0 + 1e-3
-            assert v0 * (t1 - t0) - l0 >= MIN_GAP_M + v1 * 1.0 - 0.35  # depart times rounded
+            gap = v0 * (t1 - t0) - l0
+            assert gap >= MIN_GAP_M + v1 * tau1 - 0.35  # depart times rounded to 0.01 s
+            tight[tau1] += gap < MIN_GAP_M + v1 * 1.0 - 0.5  # closer than a human may
+    assert tight[CAV_TAU_S] > 0  # CAVs do use their shorter reaction time
+    assert tight[HDV_TAU_S] == 0
