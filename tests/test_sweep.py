@@ -184,7 +184,7 @@ def test_base_scenario_by_name_and_by_relative_path(tmp_path):
     ("open_road_capacity", 13 * 5 * 3, 6),
     ("ring_fd", 8 * 5 * 5, 6),
     ("baselines", 3 * 13 * 3, 6),
-    ("capacity_hdv5", 3 * 2 * 3, 1),
+    ("capacity_hdv5", 4 * 2 * 3, 1),
 ])
 def test_shipped_sweeps_validate(name, n_full, n_smoke):
     full = sw.load_sweep(name)
@@ -202,7 +202,7 @@ def test_shipped_sweeps_validate(name, n_full, n_smoke):
         assert {p.scenario.network.length_m for p in full.points} == {2000.0}
         assert {p.scenario.network.width_m for p in full.points} == {10.2}
         levels = sorted({p.scenario.demand.inflow_vph for p in full.points})
-        want_levels = (12000.0, 16000.0) if name == "capacity_hdv5" else (2000.0, 14000.0)
+        want_levels = (12000.0, 18000.0) if name == "capacity_hdv5" else (2000.0, 14000.0)
         assert (levels[0], levels[-1]) == want_levels
     if name == "baselines":
         assert {p.scenario.network.kind for p in full.points} == {"straight", "three_lane"}
