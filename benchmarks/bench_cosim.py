@@ -24,17 +24,23 @@ metrics, apply, ...), measured by wrapping those functions with
 ``time.process_time`` timers. ``--cprofile`` adds a cProfile listing of a
 separate run (it inflates Python-heavy parts).
 
-Proposed patches (prototypes at the end of this file, monkeypatched into the
-child process): P1 subscribe only the 5 changing variables and read sizes and
-type once (sumo_world), P2 constant-width fast path for the road edges
-(network_build, runner), P3 all-pairs neighbour search for small sets
-(controllers.neighbours.cross_pairs, used by the safety layer and leader_gaps).
-Their gains are measured two ways: a *shadow* run, where every patched function
-runs in both versions on the same input at every call (alternating order, CPU
-time each, results compared exactly), plus a libsumo run that cycles the
-subscribed variables 8 -> 5 -> 0 every 20 steps (P1's SUMO-side part); and
-``--ab``: whole runs, current vs patched, interleaved, summaries compared.
-``--proposed`` runs the three variants with the patches in.
+Patch prototypes (at the end of this file, monkeypatched into the child process):
+P1 subscribe only the 5 changing variables and read sizes and type once (sumo_world),
+P2 constant-width fast path for the road edges (network_build, runner), P3 all-pairs
+neighbour search for small sets (controllers.neighbours.cross_pairs). P1 and P2 are
+now in the library (the patches then change nothing); P3 is superseded by the strip
+search of ``cross_pairs`` (``strip_cross_pairs``). They stay as the template for the
+next prototype: their gains are measured two ways: a *shadow* run, where every patched
+function runs in both versions on the same input at every call (alternating order,
+CPU time each, results compared exactly), plus a libsumo run that cycles the
+subscribed variables 8 -> 5 -> 0 every 20 steps (P1's SUMO-side part); and ``--ab``:
+whole runs, current vs patched, interleaved, summaries compared. ``--proposed`` runs
+the three variants with the patches in.
+
+Since then: roads are built of 100 m edges (SUMO's sublane step on one 2 km lane
+costs about twice as much) and the sweeps turn SUMO's collision check off; see
+``bench_sumo_options.py``. This benchmark keeps SUMO's check on in all three variants
+(``outputs.sumo_collisions = true``, the default), so the ratios compare like with like.
 
 Usage::
 
