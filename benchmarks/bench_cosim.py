@@ -38,7 +38,7 @@ whole runs, current vs patched, interleaved, summaries compared. ``--proposed`` 
 the three variants with the patches in.
 
 Since then: roads are built of 100 m edges (SUMO's sublane step on one 2 km lane
-costs about twice as much) and the sweeps turn SUMO's collision check off; see
+costs about 3.8 times as much) and the sweeps turn SUMO's collision check off; see
 ``bench_sumo_options.py``. This benchmark keeps SUMO's check on in all three variants
 (``outputs.sumo_collisions = true``, the default), so the ratios compare like with like.
 

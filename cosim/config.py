@@ -311,9 +311,9 @@ class OutputSpec:
         sumo_detectors: also write SUMO's E1 loops and edgeData for comparison.
         sumo_collisions: also let SUMO detect collisions (``--collision.action
             warn``; counted as ``collisions_sumo_*``). Our geometric check
-            (``collisions_geometric_*``) always runs. SUMO's check costs about a
-            third of its step time on a dense one-lane sublane road
-            (benchmarks/bench_sumo_options.py); sweeps may turn it off.
+            (``collisions_geometric_*``) always runs. SUMO's check costs a third
+            of its step on one long sublane lane, nothing measurable on 100 m
+            edges (benchmarks/bench_sumo_options.py); the sweeps turn it off.
         zone_start_m, zone_end_m: Edie measurement zone along the main route, m
             (zone_end_m = 0: up to 100 m before the road's end).
         cross_sections_m: positions of the flow cross-sections, m (empty: zone

@@ -99,8 +99,8 @@ class NetworkSpec:
         max_edge_length_m: straight and ring roads are split into equal edges no
             longer than this (0: one edge per road; the ring has at least 4).
             Vehicles cross the joints unchanged, but SUMO's sublane model works
-            per lane, and on one 2 km lane its step costs about twice as much as
-            on 100 m edges (benchmarks/bench_sumo_options.py).
+            per lane, and on one 2 km lane its step costs about 3.8 times as much
+            as on 100 m edges (benchmarks/bench_sumo_options.py, 12 000 veh/h).
         net_file: kind ``file``: path to the user's ``.net.xml``.
         route_edges: kind ``file``: edge ids of the main route in driving order.
         ramp_edges: kind ``file`` (optional): edge ids of a ramp route that ends
