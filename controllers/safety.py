@@ -15,6 +15,11 @@ Rules, applied in this order to CAV ``i`` with command ``u_i``:
    the neighbour also moves towards it in the same step (a CAV by up to
    ``lat_speed_max dt``, another vehicle by its current lateral speed times
    ``dt``); a vehicle never moves sideways into a gap that is already too small.
+   **No unsafe cut-ins**: a neighbour also counts as beside, at any distance
+   within reach, when sharing a band with it would leave the follower of the
+   two (the CAV behind it, or it behind the CAV) faster than the Krauss safe
+   speed of rule 3, so a CAV never moves sideways in front of a vehicle that
+   could not stop behind it, nor behind one it could not stop behind.
 3. **Safe speed** (longitudinal, Krauss 1998 / SUMO's default model): with
    ``g`` the bumper-to-bumper gap minus ``min_gap`` to the nearest vehicle
    ahead that overlaps laterally anywhere along the lateral move, the next speed
@@ -52,6 +57,19 @@ class SafetyConfig:
     @property
     def tau(self) -> float:
         return self.reaction_steps * self.dt
+
+
+def krauss_safe_speed(gap_m: np.ndarray, v_leader_mps: np.ndarray, c: SafetyConfig) -> np.ndarray:
+    """Krauss (1998) safe speed, m/s, element-wise over pairs.
+
+    ``gap_m`` is the bumper-to-bumper gap minus ``min_gap`` (m), ``v_leader_mps``
+    the leader's speed; the follower reacts after ``tau`` and brakes at
+    ``own_decel``, the leader at ``leader_decel``:
+    ``v_safe = -b tau + sqrt((b tau)^2 + v_l^2 b / b_l + 2 b g)``, 0 for ``g < 0``.
+    """
+    b, bl, tau = c.own_decel_mps2, c.leader_decel_mps2, c.tau
+    root = np.sqrt(np.maximum((b * tau) ** 2 + v_leader_mps**2 * b / bl + 2.0 * b * gap_m, 0.0))
+    return np.where(gap_m < 0, 0.0, -b * tau + root)
 
 
 @dataclass
@@ -167,6 +185,13 @@ class SafetyLayer:
         closing_behind = np.maximum(road.v[j] - v[i], 0.0)  # j catches i from behind
         buf = np.where(ds >= 0, closing_ahead, closing_behind) * c.cut_in_time_s + c.min_gap_m
         beside = np.abs(ds) < half_l + buf
+        # Cut-in: the follower of the pair, were they in one band, must already be
+        # within its Krauss safe speed (rule 3) of the other.
+        ahead_j = ds >= 0
+        v_follow = np.where(ahead_j, v[i], road.v[j])
+        v_lead = np.where(ahead_j, road.v[j], v[i])
+        gap_pair = np.abs(ds) - half_l - c.min_gap_m
+        beside |= v_follow > krauss_safe_speed(gap_pair, v_lead, c) + 1e-9
         dd = road.d[j] - d[i]
         # Worst-case lateral step of the neighbour towards i during this step.
         shift = np.zeros(len(road.s)) if road.v_lat is None else np.abs(road.v_lat) * dt
@@ -190,12 +215,7 @@ class SafetyLayer:
         lat_gap = np.maximum(road.d[j] - d_hi[i], d_lo[i] - road.d[j]) - half_w
         ahead = (ds > 0) & (lat_gap < c.lateral_clearance_m)
         gap = ds - half_l - c.min_gap_m
-        b, bl, tau = c.own_decel_mps2, c.leader_decel_mps2, c.tau
-        v_l = road.v[j]
-        v_safe_pair = -b * tau + np.sqrt(
-            np.maximum((b * tau) ** 2 + v_l**2 * b / bl + 2.0 * b * gap, 0.0)
-        )
-        v_safe_pair = np.where(gap < 0, 0.0, v_safe_pair)
+        v_safe_pair = krauss_safe_speed(gap, road.v[j], c)
         v_safe = np.full(n, np.inf)
         np.minimum.at(v_safe, i[ahead], v_safe_pair[ahead])
         u_max = (v_safe - v) / dt

@@ -107,21 +107,73 @@ def test_vehicle_beside_does_not_brake_but_one_within_clearance_does():
     assert layer.counts.speed == 1
 
 
-def test_lateral_move_into_the_path_of_a_vehicle_ahead_brakes():
-    """A car 8 m ahead (centres) at 19 m/s, side gap 0.4 m, CAV at 20 m/s: no leader while
-    staying, but the lateral move this step (1.5 m/s -> 0.15 m) sweeps into the 0.3 m
-    clearance, so it now has a leader whose Krauss safe speed (~18.8 m/s) it must meet."""
+def test_lateral_move_behind_a_vehicle_it_could_not_stop_behind_is_held_off():
+    """A car 8 m ahead (centres) at 19 m/s, side gap 0.4 m, CAV at 20 m/s: sharing its
+    band would put the CAV above its Krauss safe speed (~18.8 m/s), so the move stops at
+    the 0.3 m side clearance and the CAV need not brake."""
     rd = road([0, 8.0], [0.0, 2.2], [20, 19])
-    stay = SafetyLayer(SafetyConfig())
-    (u_stay, _), _ = one_cav(stay, [1.0, 0.0], 0.0, rd)
-    assert u_stay == 1.0
-    assert stay.counts.speed == 0
+    assert v_safe(8.0 - L, v_leader=19.0) < 20.0
     move = SafetyLayer(SafetyConfig())
     (u_move, _), vl = one_cav(move, [1.0, 0.0], 1.5, rd)
-    assert vl == pytest.approx(1.5)  # the move itself is allowed (not beside) ...
-    assert v_safe(8.0 - L, v_leader=19.0) < 20.0
-    assert u_move == pytest.approx(-9.0)  # ... but the vehicle now brakes for a leader
-    assert move.counts.speed == 1
+    assert vl == pytest.approx(1.0)  # 0.4 m -> 0.3 m in one 0.1 s step
+    assert u_move == 1.0
+    assert move.counts.side == 1 and move.counts.speed == 0
+
+
+def test_lateral_move_behind_a_vehicle_far_enough_ahead_is_free_and_bounds_the_speed():
+    """The same car 11 m ahead: the CAV (20 m/s) is within its safe speed behind it, so
+    the full lateral move goes ahead, and the car becomes a leader that caps the
+    acceleration at v_safe (rule 3 along the swept band)."""
+    rd = road([0, 11.0], [0.0, 2.2], [20, 19])
+    cap = v_safe(11.0 - L, v_leader=19.0)
+    assert 20.0 < cap < 20.0 + 5.0 * DT
+    move = SafetyLayer(SafetyConfig())
+    (u_move, _), vl = one_cav(move, [5.0, 0.0], 1.5, rd)
+    assert vl == pytest.approx(1.5)
+    assert 20.0 + u_move * DT == pytest.approx(cap, abs=1e-9)
+    assert move.counts.side == 0 and move.counts.speed == 1
+
+
+def test_no_cut_in_front_of_a_follower_that_could_not_stop():
+    """Taken from a ring run (1 km, 250 veh/km, seed 2) that collided before this rule:
+    a CAV at 16.3 m/s steers towards the band of a car 13.7 m behind (centres) at 21.7
+    m/s, side gap 0.4 m. In one band the follower would exceed its safe speed, so the
+    CAV keeps the side clearance; with the follower at the CAV's speed it may move."""
+    layer = SafetyLayer(SafetyConfig())
+    fast = road([13.69, 0.0], [0.0, -2.2], [16.32, 21.72])
+    assert 21.72 > v_safe(13.69 - L, v_leader=16.32)
+    _, vl = one_cav(layer, [0.0, -1.5], -1.5, fast)
+    assert vl == pytest.approx(-1.0)
+    assert layer.counts.side == 1
+    calm = road([13.69, 0.0], [0.0, -2.2], [16.32, 16.32])
+    _, vl = one_cav(layer, [0.0, -1.5], -1.5, calm)
+    assert vl == pytest.approx(-1.5)  # lat_speed_max
+    assert layer.counts.side == 1
+
+
+def test_braking_cav_cutting_across_a_braking_cav_never_overlaps_it():
+    """Closed loop of the same ring situation: the front CAV brakes at the emergency
+    rate and steers right into the band of the rear CAV, which is 5.4 m/s faster and
+    already at the right road edge. Both brake at 9 m/s^2 at most; the bodies never
+    overlap and the rear CAV stops at least min_gap behind if it ends up behind."""
+    layer = SafetyLayer(SafetyConfig())
+    s = np.array([199.33, 185.64])
+    d = np.array([-2.24, -4.09])
+    v = np.array([16.32, 21.72])
+    vl = np.array([-0.52, 0.0])
+    length = np.array([3.9, 4.5])
+    width = np.array([1.7, 1.78])
+    u_cmd = np.array([[-9.0, -1.5], [-4.5, 0.0]])
+    for _ in range(60):
+        rd = RoadState(s.copy(), d.copy(), v.copy(), length, width, vl.copy())
+        u, vl = layer.apply(u_cmd, np.array([0, 1]), vl, rd, edges(2))
+        v = np.maximum(v + u[:, 0] * DT, 0.0)
+        s = s + v * DT
+        d = d + vl * DT
+        lat_gap = abs(d[0] - d[1]) - 0.5 * width.sum()
+        long_gap = s[0] - s[1] - 0.5 * length.sum()
+        assert lat_gap > 0.0 or long_gap > 0.0
+    assert v[0] == 0.0 and v[1] == 0.0
 
 
 def test_speed_never_commanded_negative():
