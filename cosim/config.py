@@ -86,6 +86,9 @@ class ControllerSpec:
         time_gap_s: time gap T of the reference speed ``min(v_des, (g - s0)/T)``
             (controllers/road_reference.py), s; 0 tracks the desired speed only.
         standstill_gap_m: standstill gap s0 of that policy, m.
+        reference_decel_mps2: deceleration b of the closing-speed bound on that
+            reference (``v_ref <= sqrt(v_l^2 + 2 b (g - s0))`` with the leader's
+            speed ``v_l``), m/s^2; 0 keeps the pure time gap.
         lateral_margin_m: extra lateral width within which a vehicle ahead
             counts as the leader for the time-gap policy, m.
         comm: CommConfig fields (table [controller.comm], controllers/communication.py):
@@ -98,6 +101,7 @@ class ControllerSpec:
     lateral_damping: float = 1.0
     time_gap_s: float = 0.8
     standstill_gap_m: float = 2.0
+    reference_decel_mps2: float = 3.0
     lateral_margin_m: float = 0.3
     comm: dict = field(default_factory=dict)
 
@@ -106,7 +110,8 @@ class ControllerSpec:
             raise ConfigError(
                 f"controller.kind must be one of {', '.join(CONTROLLER_KINDS)}, got {self.kind!r}"
             )
-        for name in ("time_gap_s", "standstill_gap_m", "lateral_margin_m"):
+        for name in ("time_gap_s", "standstill_gap_m", "reference_decel_mps2",
+                     "lateral_margin_m"):
             if getattr(self, name) < 0:
                 raise ConfigError(f"controller.{name} must be >= 0, got {getattr(self, name)}")
         if self.lateral_damping < 0:

@@ -21,7 +21,7 @@ import pandas as pd
 from controllers.constraints import AccelerationBox, ConstrainedController, JerkLimit
 from controllers.flocking import OlfatiSaberController
 from controllers.observation import Observation
-from controllers.road_reference import leader_gaps, time_gap_speed
+from controllers.road_reference import leader_gaps, reference_reach_m, time_gap_speed
 from controllers.safety import RoadState, SafetyConfig, SafetyLayer
 
 from . import __version__
@@ -439,11 +439,15 @@ def _control_step(sc, net, world, controller, safety, va, cav_rows, idx_main, ed
     desired = np.array([v_des.get(i, v_cap) for i in ids])
     ctl = sc.controller
     if ctl.time_gap_s > 0:
-        gap = leader_gaps(va.s[idx_main], va.d[idx_main], va.length[idx_main],
-                          va.width[idx_main], pos_in_main,
-                          reach_m=ctl.standstill_gap_m + ctl.time_gap_s * v_cap + 10.0,
-                          period=period, lateral_margin_m=ctl.lateral_margin_m)
-        desired = time_gap_speed(desired, gap, ctl.time_gap_s, ctl.standstill_gap_m)
+        # A leader further than this cannot pull any reference below its v_des.
+        reach = reference_reach_m(float(desired.max()), ctl.time_gap_s, ctl.standstill_gap_m,
+                                  ctl.reference_decel_mps2)
+        gap, v_leader = leader_gaps(va.s[idx_main], va.d[idx_main], va.length[idx_main],
+                                    va.width[idx_main], pos_in_main, reach_m=reach,
+                                    period=period, lateral_margin_m=ctl.lateral_margin_m,
+                                    v=va.v[idx_main])
+        desired = time_gap_speed(desired, gap, ctl.time_gap_s, ctl.standstill_gap_m,
+                                 v_leader, ctl.reference_decel_mps2)
     leader_p[:, 0] = desired
     extras = {}
     leader_q = None

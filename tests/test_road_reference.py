@@ -1,9 +1,11 @@
 """Time-gap reference speed and leader search (controllers/road_reference.py)."""
 
+import math
+
 import numpy as np
 import pytest
 
-from controllers.road_reference import leader_gaps, time_gap_speed
+from controllers.road_reference import leader_gaps, reference_reach_m, time_gap_speed
 
 
 def test_time_gap_speed_is_gap_minus_standstill_over_time_gap_capped_by_desire():
@@ -31,3 +33,51 @@ def test_leader_gap_wraps_on_a_ring():
     gap = leader_gaps(s, np.zeros(2), np.full(2, 4.0), np.full(2, 1.8), np.array([0]),
                       reach_m=50.0, period=1000.0)
     assert gap[0] == pytest.approx(6.0)
+
+
+def test_leader_speed_is_that_of_the_nearest_overlapping_leader():
+    # vehicle 0 at s=0 with two leaders in its band (30 m and 60 m) and one beside at 10 m
+    s = np.array([0.0, 60.0, 30.0, 10.0])
+    d = np.array([0.0, 0.0, 0.5, 3.0])
+    v = np.array([20.0, 5.0, 12.0, 30.0])
+    gap, v_leader = leader_gaps(s, d, np.full(4, 4.0), np.full(4, 1.8), np.array([0, 1]),
+                                reach_m=100.0, v=v)
+    assert gap[0] == pytest.approx(26.0)
+    assert v_leader[0] == 12.0
+    assert np.isinf(gap[1]) and np.isnan(v_leader[1])
+
+
+def test_closing_speed_bound_slows_the_approach_to_a_stopped_car():
+    """40 m behind a stopped car the time gap alone asks for 47.5 m/s (capped at 30);
+    with b = 3 m/s^2 the reference is sqrt(2 b (g - s0)) = sqrt(228) ~ 15.1 m/s, so the
+    CAV could brake to a stop s0 behind it at b."""
+    v_des = np.array([30.0])
+    gap = np.array([40.0])
+    assert time_gap_speed(v_des, gap, 0.8, 2.0) == pytest.approx([30.0])
+    v = time_gap_speed(v_des, gap, 0.8, 2.0, np.array([0.0]), decel_mps2=3.0)
+    assert v == pytest.approx([math.sqrt(2 * 3.0 * 38.0)])
+    # a stop from v at b takes v^2 / (2 b) = g - s0 exactly
+    assert v[0] ** 2 / (2 * 3.0) == pytest.approx(40.0 - 2.0)
+
+
+def test_closing_speed_bound_never_binds_in_time_gap_equilibrium():
+    """Following a leader at its own speed with g = s0 + T v: the reference stays v (the
+    equilibrium, hence the fundamental diagram, is unchanged); below s0 it is 0; no
+    leader (nan) leaves the time-gap reference."""
+    v_eq = np.array([5.0, 15.0, 25.0, 30.0])
+    gap = 2.0 + 0.8 * v_eq
+    v = time_gap_speed(np.full(4, 35.0), gap, 0.8, 2.0, v_eq, decel_mps2=3.0)
+    assert v == pytest.approx(v_eq)
+    v = time_gap_speed(np.array([30.0, 30.0]), np.array([1.5, np.inf]), 0.8, 2.0,
+                       np.array([10.0, np.nan]), decel_mps2=3.0)
+    assert v == pytest.approx([0.0, 30.0])
+
+
+def test_reference_reach_covers_both_policies():
+    # time gap binds to s0 + T v, the closing bound to s0 + v^2 / (2 b)
+    assert reference_reach_m(30.0, 0.8, 2.0, 0.0) == pytest.approx(2.0 + 24.0 + 10.0)
+    assert reference_reach_m(30.0, 0.8, 2.0, 3.0) == pytest.approx(2.0 + 150.0 + 10.0)
+    # beyond the reach a stopped leader no longer lowers a 30 m/s reference
+    far = reference_reach_m(30.0, 0.8, 2.0, 3.0) - 10.0
+    v = time_gap_speed(np.array([30.0]), np.array([far]), 0.8, 2.0, np.array([0.0]), 3.0)
+    assert v == pytest.approx([30.0])
