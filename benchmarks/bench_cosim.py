@@ -584,7 +584,8 @@ def patch_constant_width() -> list:
 def patch_dense_pairs() -> list:
     """P3 (controllers.neighbours.cross_pairs): for the few dozen vehicles of a road
     stretch, all-pairs numpy arithmetic instead of two KD-trees and the flattening of
-    query_ball_tree's Python lists, twice per step (safety layer, leader_gaps); the
+    query_ball_tree's Python lists, in the safety layer (leader_gaps now scans the
+    vehicles sorted along the road and needs no pair search); the
     KD-tree is kept above DENSE_MAX_PAIRS pairs and on rings. Same pair sets (they
     come out sorted instead of in tree order; both callers take per-vehicle minima, so
     results are bit-identical). The flocking vehicle_term could use it too, but it sums
@@ -594,7 +595,6 @@ def patch_dense_pairs() -> list:
     import numpy as np
 
     import controllers.neighbours as nbh
-    import controllers.road_reference as rr
     import controllers.safety as sf
 
     orig_cross = nbh.cross_pairs
@@ -614,7 +614,6 @@ def patch_dense_pairs() -> list:
 
     return [
         (sf, "cross_pairs", cross_pairs, None, "cross_pairs (safety layer)", _same_pairs),
-        (rr, "cross_pairs", cross_pairs, None, "cross_pairs (leader_gaps)", _same_pairs),
     ]
 
 

@@ -34,8 +34,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from .neighbours import cross_pairs
-
 
 def leader_gaps(
     s: np.ndarray,
@@ -51,36 +49,61 @@ def leader_gaps(
     """Gap (m) from each vehicle in ``rows`` to its nearest laterally overlapping leader.
 
     ``s``, ``d``, ``length``, ``width`` (M,) describe all vehicles (centres, m);
-    ``rows`` (N,) selects the vehicles asked about. Returns (N,) gaps, inf where
-    no leader is within ``reach_m``. With ``v`` (M,) speeds, m/s, returns
-    ``(gap, v_leader)``, ``v_leader`` (N,) the speed of that leader (nan where
-    there is none).
+    ``rows`` (N,) selects the vehicles asked about. A leader is a vehicle whose
+    centre is ``0 < ds <= reach_m`` ahead along the road (wrapped on a ring of
+    length ``period``, at most half of it) and whose sides come closer than
+    ``lateral_margin_m``. Returns (N,) bumper-to-bumper gaps, inf where there is
+    no leader. With ``v`` (M,) speeds, m/s, returns ``(gap, v_leader)``,
+    ``v_leader`` (N,) the speed of that leader (nan where there is none).
+
+    Vehicles are sorted along the road once and each vehicle looks at the next
+    ones in blocks of growing size until no further vehicle can be closer than
+    its best gap: O(M log M + N k) for k vehicles looked at, never all pairs
+    within the reach (which grows as ``v^2 / 2b`` with the reference bound).
     """
-    n = len(rows)
+    n, m = len(rows), len(s)
     gap = np.full(n, np.inf)
     v_leader = np.full(n, np.nan)
     done = gap if v is None else (gap, v_leader)
-    if n == 0:
+    if n == 0 or m < 2:
         return done
-    xy = np.column_stack([s, d])
-    pairs = cross_pairs(xy[rows], xy, reach_m, period)
-    pairs = pairs[rows[pairs[:, 0]] != pairs[:, 1]]
-    if len(pairs) == 0:
-        return done
-    i, j = pairs[:, 0], pairs[:, 1]
-    me = rows[i]
-    ds = s[j] - s[me]
-    if period is not None:
-        ds = (ds + 0.5 * period) % period - 0.5 * period
-    overlap = np.abs(d[j] - d[me]) < 0.5 * (width[me] + width[j]) + lateral_margin_m
-    ahead = (ds > 0) & overlap
-    i, j, me = i[ahead], j[ahead], me[ahead]
-    g = ds[ahead] - 0.5 * (length[me] + length[j])
-    np.minimum.at(gap, i, g)
-    if v is not None and len(i):
-        order = np.lexsort((g, i))  # by vehicle, nearest leader first
-        first = order[np.r_[True, i[order][1:] != i[order][:-1]]]
-        v_leader[i[first]] = v[j[first]]
+    order = np.argsort(s, kind="stable")
+    rank = np.empty(m, dtype=np.intp)
+    rank[order] = np.arange(m)
+    max_ds = reach_m if period is None else min(reach_m, 0.5 * period)
+    half_l_max = 0.5 * float(np.max(length))
+    active = np.arange(n)
+    k0, block = 1, 8
+    while len(active) and k0 < m:
+        offsets = np.arange(k0, min(k0 + block, m))
+        me = rows[active]
+        idx = rank[me][:, None] + offsets[None, :]  # (A, B) sorted positions ahead
+        valid = idx < m if period is None else np.ones(idx.shape, dtype=bool)
+        j = order[np.where(valid, idx % m, 0)]
+        ds = s[j] - s[me][:, None]
+        if period is not None:
+            ds = np.mod(ds, period)
+        ds = np.where(valid, ds, np.inf)  # past the end of an open road
+        half_l_me = 0.5 * length[me][:, None]
+        overlap = np.abs(d[j] - d[me][:, None]) < (
+            0.5 * (width[me][:, None] + width[j]) + lateral_margin_m
+        )
+        g = ds - half_l_me - 0.5 * length[j]
+        cand = (ds > 0) & (ds <= max_ds) & overlap
+        g = np.where(cand, g, np.inf)
+        best = np.argmin(g, axis=1)
+        g_best = g[np.arange(len(active)), best]
+        better = g_best < gap[active]
+        gap[active[better]] = g_best[better]
+        if v is not None:
+            v_leader[active[better]] = v[j[better, best[better]]]
+        # ds grows along the sorted order: stop once the last one looked at is out
+        # of reach or cannot beat the best gap, whatever its length.
+        last = ds[:, -1]
+        lower = last - half_l_me[:, 0] - half_l_max
+        active = active[(last <= max_ds) & (lower < gap[active])]
+        k0 += block
+        block *= 2
     return done
 
 

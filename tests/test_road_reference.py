@@ -81,3 +81,44 @@ def test_reference_reach_covers_both_policies():
     far = reference_reach_m(30.0, 0.8, 2.0, 3.0) - 10.0
     v = time_gap_speed(np.array([30.0]), np.array([far]), 0.8, 2.0, np.array([0.0]), 3.0)
     assert v == pytest.approx([30.0])
+
+
+def _brute_force_leaders(s, d, length, width, rows, reach, period, margin, v):
+    gap = np.full(len(rows), np.inf)
+    v_leader = np.full(len(rows), np.nan)
+    for a, me in enumerate(rows):
+        for j in range(len(s)):
+            ds = s[j] - s[me]
+            if period is not None:
+                ds = ds % period
+            if j == me or not 0 < ds <= (reach if period is None else min(reach, period / 2)):
+                continue
+            if abs(d[j] - d[me]) >= 0.5 * (width[me] + width[j]) + margin:
+                continue
+            g = ds - 0.5 * (length[me] + length[j])
+            if g < gap[a]:
+                gap[a], v_leader[a] = g, v[j]
+    return gap, v_leader
+
+
+@pytest.mark.parametrize("period", [None, 600.0], ids=["open", "ring"])
+@pytest.mark.parametrize("seed", range(4))
+def test_sorted_scan_matches_brute_force(period, seed):
+    """Random traffic on 600 m, mixed lengths 3.2-12 m (trucks make the nearest centre
+    differ from the nearest bumper), reach 30 m: same gaps and leader speeds as
+    checking every pair."""
+    rng = np.random.default_rng(seed)
+    m = 60
+    s = rng.uniform(0.0, 600.0, m)
+    s[:5] = s[5]  # ties along the road
+    d = rng.uniform(-4.0, 4.0, m)
+    length = rng.choice([3.2, 4.5, 5.15, 12.0], m)
+    width = rng.choice([1.6, 1.8, 2.5], m)
+    v = rng.uniform(0.0, 35.0, m)
+    rows = rng.choice(m, 50, replace=False)
+    got_gap, got_v = leader_gaps(s, d, length, width, rows, 30.0, period, 0.3, v=v)
+    want_gap, want_v = _brute_force_leaders(s, d, length, width, rows, 30.0, period, 0.3, v)
+    assert np.isfinite(want_gap).sum() > 15 and np.isinf(want_gap).sum() > 0
+    assert got_gap == pytest.approx(want_gap)
+    np.testing.assert_array_equal(np.isnan(got_v), np.isnan(want_v))
+    assert got_v[~np.isnan(want_v)] == pytest.approx(want_v[~np.isnan(want_v)])
