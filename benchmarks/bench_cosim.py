@@ -140,7 +140,7 @@ TIMED = (
     ("safety layer (SafetyLayer.apply)", "controllers.safety", "SafetyLayer.apply"),
     ("world.apply(): setSpeed, setLateralLanePosition", "cosim.sumo_world", "SumoWorld.apply"),
     ("metrics: recorder.record (rest)", "cosim.traffic_metrics", "TrafficRecorder.record"),
-    ("metrics: gaps()", "cosim.traffic_metrics", "gaps"),
+    ("metrics: gaps and leaders, TTC", "cosim.traffic_metrics", "gaps_and_leaders"),
     ("metrics: overlapping_pairs()", "cosim.traffic_metrics", "overlapping_pairs"),
     ("metrics: flock_metrics (1/s)", "cosim.runner", "flock_metrics"),
     ("world.collisions()", "cosim.sumo_world", "SumoWorld.collisions"),

@@ -62,6 +62,11 @@ SAFETY_AGG = (
     ("min_side_clearance_m", "min"),
     ("median_time_headway_s", "mean"),
     ("p05_time_headway_s", "min"),
+    ("min_ttc_s", "min"),
+    ("min_cav_ttc_s", "min"),
+    ("tet_veh_s", "sum"),
+    ("tit_veh_s2", "sum"),
+    ("measured_vehicle_s", "sum"),
     ("safety_speed_activations", "sum"),
     ("safety_side_activations", "sum"),
     ("safety_edge_activations", "sum"),
@@ -330,17 +335,25 @@ def _aggregate(res: SweepResults, spec, extra_prefix: str | None = None) -> pd.D
 
 
 def safety_table(res: SweepResults) -> pd.DataFrame:
-    """Collisions (sums over seeds), minimum gaps and clearances, headways, per series x demand.
+    """Collisions (sums over seeds), minimum gaps and clearances, headways, time to
+    collision, per series x demand.
 
     ``collisions_cav_per_1e6_vehicle_steps`` = collision events involving a CAV (the
     geometric check, which always runs: a pair of rectangles that starts to overlap) per
     million vehicle-steps in the measurement zone. SUMO's own list
     (``collisions_sumo_*``, one entry per step of overlap) is empty when a run set
     ``outputs.sumo_collisions = false``.
+
+    Time to collision (:mod:`cosim.traffic_metrics`): ``min_ttc_s_min`` over all runs;
+    ``tet_share`` = Minderhoud & Bovy's time exposed below ``TTC*`` (summed over seeds)
+    / the measured vehicle-time, the share of vehicle-time spent closing in on a leader
+    with TTC at most ``TTC*``; ``tit_veh_s2_sum`` their time-integrated TTC.
     """
     import numpy as np
 
     df = _aggregate(res, SAFETY_AGG)
+    if {"tet_veh_s_sum", "measured_vehicle_s_sum"} <= set(df.columns):
+        df["tet_share"] = df["tet_veh_s_sum"] / df["measured_vehicle_s_sum"].replace(0, np.nan)
     if {"collisions_geometric_cav_sum", "vehicle_steps_sum"} <= set(df.columns):
         steps = df["vehicle_steps_sum"].replace(0, np.nan)
         df["collisions_cav_per_1e6_vehicle_steps"] = (

@@ -33,6 +33,8 @@ SUMMARY_KEYS = [
     ("min_gap_m", "min bumper-to-bumper gap", "m", "{:.2f}"),
     ("min_side_clearance_m", "min side clearance", "m", "{:.2f}"),
     ("median_time_headway_s", "median time headway", "s", "{:.2f}"),
+    ("min_ttc_s", "min time to collision", "s", "{:.2f}"),
+    ("tet_share", "time with TTC <= TTC* (TET share)", "", "{:.2e}"),
     ("safety_speed_activations", "safety: speed clips", "CAV-steps", "{:.0f}"),
     ("safety_side_activations", "safety: side clips", "CAV-steps", "{:.0f}"),
     ("teleports", "teleports", "", "{:.0f}"),

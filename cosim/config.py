@@ -323,6 +323,8 @@ class OutputSpec:
             (zone_end_m = 0: up to 100 m before the road's end).
         cross_sections_m: positions of the flow cross-sections, m (empty: zone
             start, middle and end).
+        ttc_threshold_s: ``TTC*`` of the time-to-collision exposure measures (TET,
+            TIT; :mod:`cosim.traffic_metrics`), s; 1.5 s as in FHWA's SSAM.
     """
 
     trajectories: bool = False
@@ -332,10 +334,12 @@ class OutputSpec:
     zone_start_m: float = 100.0
     zone_end_m: float = 0.0
     cross_sections_m: tuple[float, ...] = ()
+    ttc_threshold_s: float = 1.5
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "cross_sections_m", tuple(float(x) for x in self.cross_sections_m))
         _nonneg(self, "zone_start_m", "zone_end_m")
+        _positive(self, "ttc_threshold_s")
         if self.trajectory_every < 1:
             raise ConfigError("outputs.trajectory_every must be >= 1")
         if self.zone_end_m and self.zone_end_m <= self.zone_start_m:

@@ -237,7 +237,9 @@ def _loop(sc, net, world: SumoWorld, routes, zone, xs, progress: bool) -> RunRes
             lat_speed_max_mps=sc.limits.lat_speed_max_mps,
         )
     )
-    recorder = TrafficRecorder(dt, zone, xs, run.interval_s, run.warmup_s, period)
+    recorder = TrafficRecorder(
+        dt, zone, xs, run.interval_s, run.warmup_s, period, sc.outputs.ttc_threshold_s
+    )
     v_des = dict(routes.desired_speed_mps)
     v_cap = net.speed_limit_mps
     flock_rows: list[dict] = []

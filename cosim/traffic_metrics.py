@@ -13,6 +13,18 @@ Definitions (units in names):
 * **Gaps**: bumper-to-bumper longitudinal gap to the nearest vehicle ahead
   that overlaps laterally; side clearance to the nearest vehicle beside that
   overlaps longitudinally; time headway = gap / own speed.
+* **Time to collision** (Hayward, "Near-miss determination through use of a scale of
+  danger", Highway Research Record 384, 1972): ``TTC = gap / (v - v_leader)`` to the
+  leader above (the laterally overlapping vehicle ahead) while closing in
+  (``v > v_leader``), otherwise infinite: the car-following TTC of a same-lane pair,
+  with our lateral-overlap leader in place of the lane. Exposure to TTC below a
+  threshold ``TTC*`` (s) over the measured vehicle-steps, after Minderhoud & Bovy,
+  "Extended time-to-collision measures for road traffic safety assessment", Accident
+  Analysis & Prevention 33(1), 2001: **TET** (time exposed, vehicle-s: the time spent
+  with ``0 <= TTC <= TTC*``) and **TIT** (time integrated, vehicle-s^2: the sum of
+  ``(TTC* - TTC) dt`` over those steps). ``TTC* = 1.5 s`` by default, the maximum TTC
+  of a conflict in FHWA's Surrogate Safety Assessment Model (Gettman et al.,
+  FHWA-HRT-08-051, 2008); ``outputs.ttc_threshold_s`` sets it.
 * **Boundary violations**: vehicle-steps with any part of the body outside
   the road edges, distinct vehicles, worst excursion (m).
 * **Collisions**: SUMO's own list (``simulation.getCollisions``) and a
@@ -69,16 +81,29 @@ def overlapping_pairs(st: StepState, period: float | None) -> np.ndarray:
 
 def gaps(st: StepState, period: float | None, lateral_overlap_margin_m: float = 0.0):
     """Per-vehicle longitudinal gap to the leader, side clearance, (M,) m each (inf if none)."""
+    g_long, g_side, _ = gaps_and_leaders(st, period, lateral_overlap_margin_m)
+    return g_long, g_side
+
+
+def gaps_and_leaders(
+    st: StepState, period: float | None, lateral_overlap_margin_m: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`gaps` plus each vehicle's leader: (g_long, g_side, leader), (M,) each.
+
+    ``leader[i]`` is the index of the laterally overlapping vehicle ahead with the
+    smallest bumper gap (the one ``g_long[i]`` is measured to), -1 if none within
+    the 150 m reach."""
     n = len(st.s)
     g_long = np.full(n, np.inf)
     g_side = np.full(n, np.inf)
+    leader = np.full(n, -1, dtype=np.int64)
     if n < 2:
-        return g_long, g_side
+        return g_long, g_side, leader
     reach = 150.0
     pts, box = tree_points(np.column_stack([st.s, st.d]), reach, period)
     pairs = cKDTree(pts, boxsize=box).query_pairs(reach, output_type="ndarray")
     if len(pairs) == 0:
-        return g_long, g_side
+        return g_long, g_side, leader
     i = np.concatenate([pairs[:, 0], pairs[:, 1]])
     j = np.concatenate([pairs[:, 1], pairs[:, 0]])
     ds = st.s[j] - st.s[i]
@@ -89,10 +114,34 @@ def gaps(st: StepState, period: float | None, lateral_overlap_margin_m: float = 
     dd = np.abs(st.d[j] - st.d[i])
     lat_overlap = dd < half_w + lateral_overlap_margin_m
     ahead = (ds > 0) & lat_overlap
-    np.minimum.at(g_long, i[ahead], ds[ahead] - half_l[ahead])
+    if ahead.any():
+        ia, ja, ga = i[ahead], j[ahead], ds[ahead] - half_l[ahead]
+        order = np.lexsort((ga, ia))  # by follower, then gap: the first row of each is its leader
+        ia, ja, ga = ia[order], ja[order], ga[order]
+        first = np.ones(len(ia), dtype=bool)
+        first[1:] = ia[1:] != ia[:-1]
+        g_long[ia[first]] = ga[first]
+        leader[ia[first]] = ja[first]
     beside = (np.abs(ds) < half_l) & ~lat_overlap
     np.minimum.at(g_side, i[beside], dd[beside] - half_w[beside])
-    return g_long, g_side
+    return g_long, g_side, leader
+
+
+def time_to_collision(g_long: np.ndarray, v: np.ndarray, leader: np.ndarray) -> np.ndarray:
+    """TTC (s) of each vehicle to its leader, (M,): ``gap / (v - v_leader)`` while closing
+    in, inf when not closing in or without a leader; 0 when already overlapping.
+
+    Args:
+        g_long: bumper gaps to the leaders, (M,) m; v: speeds, (M,) m/s;
+        leader: leader indices, (M,), -1 for none (from :func:`gaps_and_leaders`).
+    """
+    ttc = np.full(len(v), np.inf)
+    has = leader >= 0
+    closing = np.zeros(len(v))
+    closing[has] = v[has] - v[leader[has]]
+    hit = has & (closing > 0)
+    ttc[hit] = np.maximum(g_long[hit], 0.0) / closing[hit]
+    return ttc
 
 
 @dataclass
@@ -120,6 +169,7 @@ class TrafficRecorder:
         cross_sections: positions (m) of the flow cross-sections.
         interval_s: interval length, s; warmup_s: start of the measurement, s.
         period: ring length, m, or None.
+        ttc_threshold_s: ``TTC*`` of the exposure measures TET and TIT, s.
     """
 
     def __init__(
@@ -130,8 +180,10 @@ class TrafficRecorder:
         interval_s: float,
         warmup_s: float,
         period: float | None = None,
+        ttc_threshold_s: float = 1.5,
     ) -> None:
         self.dt = dt
+        self.ttc_threshold_s = ttc_threshold_s
         self.zone = zone
         self.xs = np.asarray(cross_sections, dtype=float)
         self.interval_s = interval_s
@@ -153,6 +205,11 @@ class TrafficRecorder:
         self.min_cav_gap_m = np.inf
         self.headway_samples: list[np.ndarray] = []
         self.vehicle_steps = 0
+        self.measured_vehicle_s = 0.0
+        self.min_ttc_s = np.inf
+        self.min_cav_ttc_s = np.inf
+        self.tet_veh_s = 0.0
+        self.tit_veh_s2 = 0.0
 
     # --------------------------------------------------------------------------
     def record(self, st: StepState, sumo_collisions: list[tuple[str, str]]) -> None:
@@ -231,7 +288,8 @@ class TrafficRecorder:
 
         # Gaps and headways.
         if measuring:
-            g_long, g_side = gaps(st, self.period)
+            g_long, g_side, leader = gaps_and_leaders(st, self.period)
+            self._record_ttc(g_long, st, leader)
             finite = np.isfinite(g_long)
             if finite.any():
                 self.min_gap_m = min(self.min_gap_m, float(g_long[finite].min()))
@@ -250,6 +308,20 @@ class TrafficRecorder:
                     acc.min_side_clearance_m = min(
                         acc.min_side_clearance_m, float(g_side[fs].min())
                     )
+
+    def _record_ttc(self, g_long: np.ndarray, st: StepState, leader: np.ndarray) -> None:
+        """TTC minimum and Minderhoud & Bovy's TET/TIT over one measured step."""
+        self.measured_vehicle_s += self.dt * len(st.s)
+        ttc = time_to_collision(g_long, st.v, leader)
+        if not len(ttc):
+            return
+        self.min_ttc_s = min(self.min_ttc_s, float(ttc.min()))
+        if st.is_cav.any():
+            self.min_cav_ttc_s = min(self.min_cav_ttc_s, float(ttc[st.is_cav].min()))
+        exposed = ttc <= self.ttc_threshold_s
+        if exposed.any():
+            self.tet_veh_s += self.dt * int(np.count_nonzero(exposed))
+            self.tit_veh_s2 += self.dt * float(np.sum(self.ttc_threshold_s - ttc[exposed]))
 
     # --------------------------------------------------------------------------
     def _close_interval(self) -> None:
@@ -313,6 +385,16 @@ class TrafficRecorder:
             "min_side_clearance_m": self.min_side_clearance_m,
             "median_time_headway_s": float(np.median(hw)) if len(hw) else np.nan,
             "p05_time_headway_s": float(np.percentile(hw, 5)) if len(hw) else np.nan,
+            "min_ttc_s": self.min_ttc_s,
+            "min_cav_ttc_s": self.min_cav_ttc_s,
+            "ttc_threshold_s": self.ttc_threshold_s,
+            "measured_vehicle_s": self.measured_vehicle_s,
+            "tet_veh_s": self.tet_veh_s,
+            "tit_veh_s2": self.tit_veh_s2,
+            # TET as a share of the measured vehicle-time (all vehicles on the road).
+            "tet_share": (
+                self.tet_veh_s / self.measured_vehicle_s if self.measured_vehicle_s else np.nan
+            ),
             "vehicle_steps": self.vehicle_steps,
             "n_intervals": len(rows),
         }

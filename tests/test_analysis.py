@@ -53,6 +53,9 @@ def sweep_dir(tmp_path):
                     "boundary_vehicle_steps": seed, "boundary_vehicle_steps_cav": 0,
                     "boundary_vehicles": 1, "worst_boundary_excursion_m": 0.1 * seed,
                     "vehicle_steps": 1000,
+                    "min_ttc_s": 2.0 + seed, "min_cav_ttc_s": 2.5 + seed,
+                    "tet_veh_s": 0.5 * seed, "tit_veh_s2": 0.1 * seed,
+                    "measured_vehicle_s": 100.0,
                     "flock_min_agent_distance_m": 3.0 + seed if share else np.nan,
                     "flock_velocity_alignment": 0.9 if share else np.nan,
                     "clip_rate_acceleration_box": 0.01 * seed,
@@ -152,6 +155,11 @@ def test_safety_boundary_and_flock_aggregate_over_seeds(sweep_dir):
     assert s.loc[(1.0, 3000.0), "collisions_cav_per_1e6_vehicle_steps"] == pytest.approx(2000.0)
     assert s.loc[(0.0, 1000.0), "min_gap_m_min"] == pytest.approx(10.0)
     assert s.loc[(0.0, 1000.0), "median_time_headway_s_mean"] == pytest.approx(3.0)
+    assert s.loc[(0.0, 1000.0), "min_ttc_s_min"] == pytest.approx(3.0)
+    assert s.loc[(0.0, 1000.0), "min_cav_ttc_s_min"] == pytest.approx(3.5)
+    assert s.loc[(0.0, 1000.0), "tit_veh_s2_sum"] == pytest.approx(0.6)
+    # time exposed: 0.5 + 1.0 + 1.5 vehicle-s over 3 runs x 100 vehicle-s
+    assert s.loc[(0.0, 1000.0), "tet_share"] == pytest.approx(3.0 / 300.0)
     b = an.boundary_table(res).set_index(["demand.cav_share", "demand.inflow_vph"])
     assert b.loc[(0.0, 1000.0), "boundary_vehicle_steps_sum"] == 6
     assert b.loc[(0.0, 1000.0), "worst_boundary_excursion_m_max"] == pytest.approx(0.3)

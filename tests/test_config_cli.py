@@ -308,6 +308,7 @@ def test_empty_config_is_the_default_scenario():
         ({"safety": {"enabled": "yes"}}, "safety.enabled"),
         ({"obstacle": {"length_m": -1.0}}, "obstacle.length_m"),
         ({"outputs": {"zone_start_m": 500.0, "zone_end_m": 100.0}}, "outputs.zone_end_m"),
+        ({"outputs": {"ttc_threshold_s": 0.0}}, "outputs.ttc_threshold_s"),
         ({"controller": {"params": {"zzz": 1.0}}}, "controller.params"),
         ({"controller": {"kind": "magic"}}, "controller.kind"),
     ],

@@ -261,10 +261,13 @@ def test_safety_layer_prevents_collisions_of_weakly_braking_flock(tmp_path, sumo
         assert s["collisions_geometric_cav"] == 0
         assert s["boundary_vehicle_steps"] == 0
         assert s["min_cav_gap_m"] > 0.0
+        assert s["min_cav_ttc_s"] > 0.0
     else:
         assert s["collisions_sumo_cav"] > 0
         assert s["collisions_geometric_cav"] > 0
         assert s["min_cav_gap_m"] < 0.0  # overlapping bumpers
+        assert s["min_cav_ttc_s"] == 0.0  # closing in while overlapping
+        assert s["tet_veh_s"] > 0.0 and 0.0 < s["tet_share"] < 1.0
         assert s["safety_agent_steps"] == 0
 
 

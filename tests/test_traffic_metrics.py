@@ -14,7 +14,14 @@ import math
 import numpy as np
 import pytest
 
-from cosim.traffic_metrics import StepState, TrafficRecorder, gaps, overlapping_pairs
+from cosim.traffic_metrics import (
+    StepState,
+    TrafficRecorder,
+    gaps,
+    gaps_and_leaders,
+    overlapping_pairs,
+    time_to_collision,
+)
 
 DT = 0.1
 L, W = 4.5, 1.8
@@ -247,3 +254,80 @@ def test_summary_of_an_empty_zone_has_zero_flow_and_undefined_speed():
     assert s["edie_flow_vph"] == 0.0
     assert s["edie_density_vpkm"] == 0.0
     assert math.isnan(s["space_mean_speed_mps"])
+
+
+# --------------------------------------------------------------------------------------
+# Time to collision (Hayward 1972) and its exposure (Minderhoud & Bovy 2001)
+# --------------------------------------------------------------------------------------
+
+
+def test_leader_is_the_nearest_laterally_overlapping_vehicle_ahead():
+    # 0 at s 0; 1 at s 30 (overlapping); 2 at s 15 but 2.5 m to the side (no overlap);
+    # 3 at s 50 (overlapping, farther than 1).
+    st = state(0.0, [0.0, 30.0, 15.0, 50.0], d=[0.0, 0.5, 2.5, 0.0])
+    g_long, _, leader = gaps_and_leaders(st, None)
+    assert leader.tolist() == [1, 3, -1, -1]
+    assert g_long[0] == pytest.approx(30.0 - L)
+    assert g_long[1] == pytest.approx(20.0 - L)
+
+
+def test_time_to_collision_closing_opening_and_overlapping():
+    g = np.array([15.0, 15.0, -0.2, 7.0])
+    v = np.array([20.0, 6.0, 12.0, 8.0])
+    leader = np.array([3, 3, 3, -1])  # all follow vehicle 3 (8 m/s), which follows nobody
+    ttc = time_to_collision(g, v, leader)
+    assert ttc[0] == pytest.approx(15.0 / 12.0)  # closing at 12 m/s
+    assert math.isinf(ttc[1])  # slower than its leader: not closing in
+    assert ttc[2] == 0.0  # already overlapping and closing
+    assert math.isinf(ttc[3])  # no leader
+
+
+def closing_pair(k_steps: int, gap0: float, v_follow: float, v_lead: float, follower_cav=True):
+    """A follower closing in on a leader ahead in the same band, t = k dt, k = 1..k_steps."""
+    for k in range(1, k_steps + 1):
+        t = round(k * DT, 10)
+        s = np.array([0.0 + v_follow * t, L + gap0 + v_lead * t])
+        st = state(t, s, ids=["f", "l"], is_cav=[follower_cav, True])
+        st.v = np.array([v_follow, v_lead])
+        yield st
+
+
+@pytest.mark.parametrize("threshold, tet_s, tit_s2", [(1.5, 1.0, 0.5), (3.0, 2.5, 3.125)])
+def test_ttc_exposure_of_a_closing_pair(threshold, tet_s, tit_s2):
+    """Gap 20.25 m closing at 5 m/s: TTC = 4.05 - t. Steps t = 0.1..3.5 s; TTC <= TTC*
+    from t = 4.05 - TTC* on: TET = dt x those steps, TIT = sum (TTC* - TTC) dt."""
+    rec = TrafficRecorder(DT, (0.0, 1000.0), (), 10.0, 0.0, ttc_threshold_s=threshold)
+    for st in closing_pair(35, 20.25, 15.0, 10.0):
+        rec.record(st, [])
+    rec.finish(3.5)
+    s = rec.summary()
+    assert s["min_ttc_s"] == pytest.approx(4.05 - 3.5)
+    assert s["min_cav_ttc_s"] == pytest.approx(4.05 - 3.5)
+    assert s["tet_veh_s"] == pytest.approx(tet_s)
+    assert s["tit_veh_s2"] == pytest.approx(tit_s2)
+    assert s["measured_vehicle_s"] == pytest.approx(2 * 3.5)
+    assert s["tet_share"] == pytest.approx(tet_s / 7.0)
+    assert s["ttc_threshold_s"] == threshold
+
+
+def test_ttc_exposure_is_zero_for_a_steady_platoon_and_hdv_followers_are_not_cavs():
+    rec = TrafficRecorder(DT, (0.0, 1000.0), (), 10.0, 0.0)
+    for st in platoon(25.0, 30.0, 50):
+        rec.record(st, [])
+    s = rec.summary()
+    assert math.isinf(s["min_ttc_s"]) and s["tet_veh_s"] == 0.0 and s["tet_share"] == 0.0
+    rec = TrafficRecorder(DT, (0.0, 1000.0), (), 10.0, 0.0)
+    for st in closing_pair(35, 20.25, 15.0, 10.0, follower_cav=False):
+        rec.record(st, [])
+    s = rec.summary()
+    assert s["min_ttc_s"] == pytest.approx(0.55)
+    assert math.isinf(s["min_cav_ttc_s"])  # the only closing vehicle is human-driven
+
+
+def test_ttc_is_not_recorded_during_warmup():
+    rec = TrafficRecorder(DT, (0.0, 1000.0), (), 10.0, 5.0)  # warm-up longer than the run
+    for st in closing_pair(35, 20.25, 15.0, 10.0):
+        rec.record(st, [])
+    s = rec.summary()
+    assert math.isinf(s["min_ttc_s"]) and s["tet_veh_s"] == 0.0
+    assert s["measured_vehicle_s"] == 0.0 and math.isnan(s["tet_share"])
