@@ -185,17 +185,18 @@ def test_base_scenario_by_name_and_by_relative_path(tmp_path):
     ("ring_fd", 8 * 5 * 5, 6),
     ("baselines", 3 * 13 * 3, 6),
     ("capacity_hdv5", 4 * 2 * 3, 1),
+    ("ring_gamma", 8 * 3 * 2, 2),
 ])
 def test_shipped_sweeps_validate(name, n_full, n_smoke):
     full = sw.load_sweep(name)
     smoke = sw.load_sweep(name, smoke=True)
     assert len(full.points) == n_full and len(smoke.points) == n_smoke
     shares = {p.scenario.demand.cav_share for p in full.points}
-    want = {"baselines": {0.0}, "capacity_hdv5": {1.0, 0.95}}.get(
+    want = {"baselines": {0.0}, "capacity_hdv5": {1.0, 0.95}, "ring_gamma": {1.0}}.get(
         name, {0.0, 0.25, 0.5, 0.75, 1.0})
     assert shares == want
     assert all(p.scenario.scenario.duration_s <= 40.0 for p in smoke.points)
-    if name == "ring_fd":
+    if name.startswith("ring"):
         assert {p.scenario.network.circumference_m for p in full.points} == {1000.0}
         assert smoke.demand_axis == "demand.ring_density_vpkm"
     else:
@@ -206,6 +207,9 @@ def test_shipped_sweeps_validate(name, n_full, n_smoke):
         assert (levels[0], levels[-1]) == want_levels
     if name == "baselines":
         assert {p.scenario.network.kind for p in full.points} == {"straight", "three_lane"}
+    if name == "ring_gamma":
+        gains = {tuple(p.scenario.controller.flocking_params().c2_gamma) for p in full.points}
+        assert gains == {(0.5, 0.0), (1.0, 0.0), (2.0, 0.0)}
 
 
 # --------------------------------------------------------------------------------------
