@@ -317,3 +317,25 @@ def test_time_gap_reference_gives_a_real_ring_fundamental_diagram(tmp_path, sumo
     assert dense["space_mean_speed_mps"] < 0.6 * v_free
     assert pinned["space_mean_speed_mps"] > 0.9 * v_free
     assert pinned["safety_speed_activations"] > 100 * max(dense["safety_speed_activations"], 1)
+
+
+def test_fast_reference_tracking_relieves_the_safety_layer_in_ring_congestion(tmp_path, sumo_env):
+    """1 km ring at 250 veh/km, 100 % CAVs, 120 s (seed 1). With the default gain
+    c2_gamma = 0.5 1/s the flock lags its time-gap reference in stop-and-go, the safety
+    layer clips its speed and CAVs close in below TTC 1.5 s; with c2_gamma = 2 1/s
+    neither happens and the ring carries more (measured: 10 144 against 11 111 veh/h).
+    The ring_gamma sweep measures it over the whole diagram."""
+    def run(name: str, params: dict) -> dict:
+        spec = _ring(250.0, {"params": params})
+        spec["scenario"].update(duration_s=120.0, warmup_s=60.0, interval_s=60.0)
+        spec["network"]["circumference_m"] = 1000.0
+        return _scenario(tmp_path / name, spec, sumo_env)["summary"]
+
+    slow = run("slow", {})
+    fast = run("fast", {"c2_gamma": [2.0, 0.0]})
+    for s in (slow, fast):
+        assert s["collisions_geometric_cav"] == 0
+        assert s["boundary_vehicle_steps"] == 0
+    assert slow["safety_speed_activations"] > 1000 and slow["tet_share"] > 1e-3
+    assert fast["safety_speed_activations"] == 0 and fast["tet_share"] == 0.0
+    assert fast["edie_flow_vph"] > 1.05 * slow["edie_flow_vph"]
