@@ -17,7 +17,9 @@ Definitions (units in names):
   danger", Highway Research Record 384, 1972): ``TTC = gap / (v - v_leader)`` to the
   leader above (the laterally overlapping vehicle ahead) while closing in
   (``v > v_leader``), otherwise infinite: the car-following TTC of a same-lane pair,
-  with our lateral-overlap leader in place of the lane. Exposure to TTC below a
+  with our lateral-overlap leader in place of the lane; the summary keeps its minimum
+  over all followers (``min_ttc_s``) and over CAV followers (``min_cav_ttc_s``). Exposure
+  to TTC below a
   threshold ``TTC*`` (s) over the measured vehicle-steps, after Minderhoud & Bovy,
   "Extended time-to-collision measures for road traffic safety assessment", Accident
   Analysis & Prevention 33(1), 2001: **TET** (time exposed, vehicle-s: the time spent
