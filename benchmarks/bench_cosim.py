@@ -126,25 +126,25 @@ class Timers:
 
 #: (label, module path, attribute path) of the functions timed in the profile run.
 TIMED = (
-    ("loop body (runner._loop itself)", "cosim.runner", "_loop"),
+    ("loop body (runner._loop itself)", "cosim.sim.runner", "_loop"),
     ("SUMO step (libsumo.simulationStep)", "libsumo", "simulationStep"),
-    ("world.step(): departures, subscribe", "cosim.sumo_world", "SumoWorld.step"),
+    ("world.step(): departures, subscribe", "cosim.sumo.world", "SumoWorld.step"),
     ("subscription fetch (getAllSubscriptionResults)", "libsumo",
      "vehicle.getAllSubscriptionResults"),
-    ("world.read(): arrays, road frame", "cosim.sumo_world", "SumoWorld.read"),
-    ("world.take_over()", "cosim.sumo_world", "SumoWorld.take_over"),
-    ("control step glue (observation, refs)", "cosim.runner", "_control_step"),
-    ("edges ahead (_edges_ahead)", "cosim.runner", "_edges_ahead"),
-    ("time-gap leader search (leader_gaps)", "cosim.runner", "leader_gaps"),
+    ("world.read(): arrays, road frame", "cosim.sumo.world", "SumoWorld.read"),
+    ("world.take_over()", "cosim.sumo.world", "SumoWorld.take_over"),
+    ("control step glue (observation, refs)", "cosim.sim.runner", "_control_step"),
+    ("edges ahead (_edges_ahead)", "cosim.sim.runner", "_edges_ahead"),
+    ("time-gap leader search (leader_gaps)", "cosim.sim.runner", "leader_gaps"),
     ("controller (flocking + layers)", "controllers.constraints", "ConstrainedController.compute"),
     ("safety layer (SafetyLayer.apply)", "controllers.safety", "SafetyLayer.apply"),
-    ("world.apply(): setSpeed, setLateralLanePosition", "cosim.sumo_world", "SumoWorld.apply"),
-    ("metrics: recorder.record (rest)", "cosim.traffic_metrics", "TrafficRecorder.record"),
-    ("metrics: gaps and leaders, TTC", "cosim.traffic_metrics", "gaps_and_leaders"),
-    ("metrics: overlapping_pairs()", "cosim.traffic_metrics", "overlapping_pairs"),
-    ("metrics: flock_metrics (1/s)", "cosim.runner", "flock_metrics"),
-    ("world.collisions()", "cosim.sumo_world", "SumoWorld.collisions"),
-    ("StepState subset/other", "cosim.runner", "_subset"),
+    ("world.apply(): setSpeed, setLateralLanePosition", "cosim.sumo.world", "SumoWorld.apply"),
+    ("metrics: recorder.record (rest)", "cosim.metrics.traffic", "TrafficRecorder.record"),
+    ("metrics: gaps and leaders, TTC", "cosim.metrics.traffic", "gaps_and_leaders"),
+    ("metrics: overlapping_pairs()", "cosim.metrics.traffic", "overlapping_pairs"),
+    ("metrics: flock_metrics (1/s)", "cosim.sim.runner", "flock_metrics"),
+    ("world.collisions()", "cosim.sumo.world", "SumoWorld.collisions"),
+    ("StepState subset/other", "cosim.sim.runner", "_subset"),
 )
 
 
@@ -169,9 +169,9 @@ def _install_timers(timers: Timers) -> None:
 def child_main(payload: dict) -> dict:
     import numpy as np
 
-    from cosim.config import scenario_from_dict
-    from cosim.runner import run_scenario
-    from cosim.sumo_world import SumoWorld
+    from cosim.config.scenario import scenario_from_dict
+    from cosim.sim.runner import run_scenario
+    from cosim.sumo.world import SumoWorld
 
     if payload.get("mode") == "subs":
         return subscription_cost(payload["cmd"])
@@ -461,7 +461,7 @@ def patch_subscribe_dynamic() -> list:
     lookup per lane (offset, lateral offset, on-main) instead of three."""
     import numpy as np
 
-    from cosim import sumo_world as sw
+    from cosim.sumo import world as sw
 
     def dyn_vars():
         import libsumo as ls
@@ -545,8 +545,8 @@ def patch_constant_width() -> list:
     (not for 5 look-ahead horizons) when the width is constant."""
     import numpy as np
 
-    from cosim import network_build as nb
-    from cosim import runner
+    from cosim.road import frame as nb
+    from cosim.sim import runner
 
     def cache(net):
         c = net.__dict__.get("_width_cache")
@@ -782,7 +782,7 @@ def main(argv: list[str] | None = None) -> int:
     import numpy
     import pandas
 
-    from cosim.network_build import sumo_version
+    from cosim.sumo.binaries import sumo_version
 
     print(f"bench_cosim: {case['length_m']:g} m x 10.2 m, {case['inflow_vph']:g} veh/h, "
           f"{100 * case['cav_share']:g} % CAVs, {case['duration_s']:g} s, step 0.1 s, "

@@ -150,9 +150,9 @@ def lateral_behaviour(tr, warmup_s: float, dt_sample: float) -> dict:
 def child_main(payload: dict) -> dict:
     import numpy as np
 
-    from cosim.config import scenario_from_dict
-    from cosim.runner import run_scenario
-    from cosim.sumo_world import SumoWorld
+    from cosim.config.scenario import scenario_from_dict
+    from cosim.sim.runner import run_scenario
+    from cosim.sumo.world import SumoWorld
 
     captured = {}
     start = SumoWorld.start
@@ -315,7 +315,7 @@ def main(argv: list[str] | None = None) -> int:
         case["inflow_vph"] = a.inflow
     if a.duration:
         case["duration_s"] = a.duration
-    from cosim.network_build import sumo_version
+    from cosim.sumo.binaries import sumo_version
 
     print(f"bench_lateral_resolution: {case['length_m']:g} m x 10.2 m, "
           f"{case['inflow_vph']:g} veh/h, {100 * case['cav_share']:g} % CAVs (flocking), "

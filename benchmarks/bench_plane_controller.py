@@ -68,7 +68,7 @@ from controllers.flocking import OlfatiSaberController  # noqa: E402
 from controllers.observation import Observation  # noqa: E402
 from controllers.params import FlockingParams  # noqa: E402
 from controllers.references import VirtualLeader  # noqa: E402
-from cosim.plane import PlaneWorld  # noqa: E402
+from cosim.plane.world import PlaneWorld  # noqa: E402
 
 MIB = 2.0**20
 SPACING_M = 5.7  # lattice spacing (d = 6 m, r = 7.2 m: 4 neighbours each)

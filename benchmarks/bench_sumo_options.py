@@ -37,8 +37,11 @@ sys.path.insert(0, str(HERE))
 
 from bench_cosim import run_plain  # noqa: E402
 
-from cosim.demand import DemandSpec, write_routes  # noqa: E402
-from cosim.network_build import NetworkSpec, build_network, sumo_binary, sumo_version  # noqa: E402
+from cosim.demand.routes import write_routes  # noqa: E402
+from cosim.demand.spec import DemandSpec  # noqa: E402
+from cosim.road.build import build_network  # noqa: E402
+from cosim.road.spec import NetworkSpec  # noqa: E402
+from cosim.sumo.binaries import sumo_binary, sumo_version  # noqa: E402
 
 EDGES = {"one edge": 0.0, "100 m edges": 100.0}
 COLLISION = ("warn", "none")

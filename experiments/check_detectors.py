@@ -49,7 +49,7 @@ import pandas as pd
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cosim.sumo_outputs import e1_sections, read_run_detectors, window  # noqa: E402
+from cosim.sumo.outputs import e1_sections, read_run_detectors, window  # noqa: E402
 
 #: Distance within which an edge's span counts as equal to the measurement zone, m.
 ZONE_EDGE_TOL_M = 0.5
@@ -92,9 +92,9 @@ def scenario_spec(
 _CHILD = """
 import json, sys
 sys.path.insert(0, {root!r})
-from cosim.config import scenario_from_dict
-from cosim.network_build import build_network
-from cosim.runner import run_scenario
+from cosim.config.scenario import scenario_from_dict
+from cosim.road import build_network
+from cosim.sim.runner import run_scenario
 spec = json.loads(sys.argv[2])
 sc = scenario_from_dict(spec)
 net = build_network(sc.network)
@@ -173,7 +173,8 @@ def sec_positions(e1: pd.DataFrame) -> dict:
 
 def _zone_edge(meta: dict) -> tuple[str, float, float] | None:
     """The edge whose span is the measurement zone, from the network's road frame."""
-    from cosim.network_build import NetworkSpec, build_network
+    from cosim.road.build import build_network
+    from cosim.road.spec import NetworkSpec
 
     cfg = meta["config"]["network"]
     net = build_network(NetworkSpec(**{k: v for k, v in cfg.items()

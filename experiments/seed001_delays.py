@@ -4,7 +4,7 @@ Usage::
 
     python experiments/seed001_delays.py [--smoke] [--out DIR]
 
-Seed 001's 50 agents (``cosim.plane_scenarios.seed001_world``: positions in
+Seed 001's 50 agents (``cosim.plane.scenarios.seed001_world``: positions in
 [0, 100]^2, OS06 Algorithm 2 with c1 = c2 = 0.1 towards the goal, dt = 0.01 s)
 fly a mission of several static waypoints (:class:`WaypointSequence`: the
 reference jumps to the next waypoint when the flock's centroid is within 5 m)
@@ -62,8 +62,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from controllers.communication import CommConfig, CommunicatingController  # noqa: E402
 from controllers.constraints import ConstrainedController  # noqa: E402
 from controllers.references import WaypointSequence  # noqa: E402
-from cosim.plane import PlaneWorld  # noqa: E402
-from cosim.plane_scenarios import seed001_world  # noqa: E402
+from cosim.plane.scenarios import seed001_world
+from cosim.plane.world import PlaneWorld
 
 WAYPOINTS = np.array([[150.0, 150.0], [300.0, 150.0], [300.0, 300.0], [150.0, 300.0]])  # m
 WAYPOINT_TOL_M = 5.0

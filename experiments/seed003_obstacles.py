@@ -104,7 +104,7 @@ from controllers.obstacles import (  # noqa: E402
 )
 from controllers.params import FlockingParams  # noqa: E402
 from controllers.references import VirtualLeader  # noqa: E402
-from cosim.plane import PlaneWorld  # noqa: E402
+from cosim.plane.world import PlaneWorld
 
 TABLE3 = BoundaryPointParams()
 SPACING = 0.5  # m, boundary point spacing

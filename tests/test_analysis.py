@@ -14,8 +14,8 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from cosim import analysis as an
-from cosim import figures as fg
+from cosim.analysis import analysis as an
+from cosim.analysis import figures as fg
 
 PNG = b"\x89PNG\r\n\x1a\n"
 DEMANDS = (1000.0, 2000.0, 3000.0)
@@ -272,7 +272,7 @@ def test_animate_refuses_a_backwards_time_range(tmp_path):
     run.mkdir()
     _trajectory_run(run)
     pd.DataFrame([{"edie_flow_vph": 1.0}]).to_csv(run / "summary.csv", index=False)
-    proc = subprocess.run([sys.executable, "-m", "cosim.cli", "analyse", str(run), "--animate",
+    proc = subprocess.run([sys.executable, "-m", "cosim.cli.main", "analyse", str(run), "--animate",
                            "--t-range", "8", "2"], capture_output=True, text=True)
     assert proc.returncode == 2
     assert "--t-range must be increasing" in proc.stderr

@@ -17,7 +17,7 @@ import pytest
 from controllers.communication import CommConfig, CommunicatingController
 from controllers.flocking import OlfatiSaberController
 from controllers.observation import Observation
-from cosim.plane_scenarios import seed001_params, seed001_world
+from cosim.plane.scenarios import seed001_params, seed001_world
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -5,7 +5,7 @@ SUMO failing) prints exactly one line ``error: ...`` on stderr, exits with statu
 shows no traceback. A run writes summary.csv, intervals.csv, meta.json (seed and
 versions, SUMO's included) and config.toml, and the same seed gives the same results.
 
-The CLI runs as a subprocess (``python -m cosim.cli``), networks in a temporary cache.
+The CLI runs as a subprocess (``python -m cosim.cli.main``), networks in a temporary cache.
 """
 
 from __future__ import annotations
@@ -22,13 +22,14 @@ from pathlib import Path
 
 import pytest
 
-from cosim.cli import builtin_scenarios
-from cosim.config import Scenario, load_scenario, scenario_from_dict
+from cosim.cli.main import builtin_scenarios
+from cosim.config.scenario import Scenario, load_scenario, scenario_from_dict
+from cosim.config.toml_write import dumps_toml
 from cosim.errors import ConfigError, CosimError
-from cosim.network_build import NetworkSpec, build_network
-from cosim.toml_write import dumps_toml
+from cosim.road.build import build_network
+from cosim.road.spec import NetworkSpec
 
-COSIM = [sys.executable, "-m", "cosim.cli"]
+COSIM = [sys.executable, "-m", "cosim.cli.main"]
 
 TINY = """\
 [scenario]

@@ -14,7 +14,7 @@ from controllers.constraints import (
 from controllers.flocking import OlfatiSaberController
 from controllers.observation import InvalidStateError, Observation
 from controllers.params import FlockingParams, ParameterError
-from cosim.plane import PlaneWorld
+from cosim.plane.world import PlaneWorld
 
 # Rounding slack: p + ((sat - p) / dt) * dt reproduces sat to a few ulps of 10 m/s.
 SPEED_TOL = 1e-9

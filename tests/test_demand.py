@@ -13,14 +13,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.demand import (
-    DemandSpec,
-    arrival_times,
-    write_detectors,
-    write_routes,
-)
+from cosim.demand.plan import arrival_times
+from cosim.demand.routes import write_routes
+from cosim.demand.spec import DemandSpec
 from cosim.errors import ConfigError
-from cosim.network_build import NetworkSpec, RoadNetwork, build_network, sumo_binary
+from cosim.road.build import build_network
+from cosim.road.frame import RoadNetwork
+from cosim.road.spec import NetworkSpec
+from cosim.sumo.binaries import sumo_binary
+from cosim.sumo.detectors import write_detectors
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -215,7 +216,7 @@ def test_sumo_inserts_the_whole_ring_at_t0_and_keeps_it(ring: RoadNetwork, tmp_p
         import json
         import xml.etree.ElementTree as ET
         import libsumo as t
-        from cosim.network_build import NetworkSpec, build_network
+        from cosim.road import NetworkSpec, build_network
         net = build_network(NetworkSpec(kind="ring", circumference_m=300.0),
                             {str(Path(ring.net_file).parents[1])!r})
         t.start(["sumo", "-n", str(net.net_file), "-r", {str(info.path)!r}, "--no-step-log",
@@ -341,8 +342,10 @@ def test_slot_insertion_keeps_headway_and_never_departs_faster_than_the_slot_lea
     at least s0 + v * tau with the follower's own tau (CAV 0.5 s, human 1 s)."""
     import xml.etree.ElementTree as ET
 
-    from cosim.demand import CAV_TAU_S, HDV_TAU_S, MIN_GAP_M, DemandSpec, write_routes
-    from cosim.network_build import NetworkSpec, build_network
+    from cosim.demand.routes import write_routes
+    from cosim.demand.spec import CAV_TAU_S, HDV_TAU_S, MIN_GAP_M, DemandSpec
+    from cosim.road.build import build_network
+    from cosim.road.spec import NetworkSpec
 
     net = build_network(NetworkSpec(kind="straight", length_m=300.0), cache_dir=tmp_path)
     demand = DemandSpec(inflow_vph=16000.0, duration_s=120.0, cav_share=0.5,

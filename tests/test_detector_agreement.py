@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.sumo_outputs import e1_sections, read_e1, read_meandata, window
+from cosim.sumo.outputs import e1_sections, read_e1, read_meandata, window
 
 ROOT = Path(__file__).resolve().parents[1]
 TOL = 0.02  # the agreement target: 2 %

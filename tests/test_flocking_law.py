@@ -18,7 +18,7 @@ from controllers.flocking import OlfatiSaberController
 from controllers.observation import Circles, InvalidStateError, Observation, Walls
 from controllers.params import FlockingParams, ParameterError
 from controllers.references import VirtualLeader
-from cosim.plane import PlaneWorld
+from cosim.plane.world import PlaneWorld
 
 NO_GAMMA = {"c1_gamma": 0.0, "c2_gamma": 0.0}
 

@@ -1,4 +1,4 @@
-"""Tests of cosim.network_build: generated networks, the road frame and the cache."""
+"""Tests of cosim.road: generated networks, the road frame and the cache."""
 
 from __future__ import annotations
 
@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 import sumolib
 
-from cosim import network_build as nb
 from cosim.errors import ConfigError, NetworkError
-from cosim.network_build import NetworkSpec, build_network
+from cosim.road import build as nb
+from cosim.road.build import build_network
+from cosim.road.spec import NetworkSpec
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -123,7 +124,7 @@ def test_ring_vehicle_circles_and_s_wraps_continuously(cache: Path, tmp_path: Pa
     out = run_python(f"""
         import json
         import libsumo as t
-        from cosim.network_build import NetworkSpec, build_network
+        from cosim.road import NetworkSpec, build_network
         net = build_network(NetworkSpec(kind="ring", circumference_m=300.0), {str(cache)!r})
         t.start(["sumo", "-n", str(net.net_file), "-r", {str(rou)!r}, "--no-step-log", "true",
                  "--lateral-resolution", "0.8", "--step-length", "0.1"])
@@ -169,7 +170,7 @@ def test_vehicles_cross_the_joints_of_a_split_road_unchanged(cache: Path, tmp_pa
     out = run_python(f"""
         import json
         import libsumo as t
-        from cosim.network_build import NetworkSpec, build_network
+        from cosim.road import NetworkSpec, build_network
         net = build_network(NetworkSpec(kind="straight", length_m=600.0), {str(cache)!r})
         t.start(["sumo", "-n", str(net.net_file), "-r", {str(rou)!r}, "--no-step-log", "true",
                  "--lateral-resolution", "0.8", "--step-length", "0.1"])
@@ -236,7 +237,7 @@ def test_onramp_vehicles_reach_the_end_with_continuous_s(cache: Path, tmp_path: 
     out = run_python(f"""
         import json
         import libsumo as t
-        from cosim.network_build import NetworkSpec, build_network
+        from cosim.road import NetworkSpec, build_network
         net = build_network(NetworkSpec(kind="onramp", length_m=400.0, merge_position_m=150.0,
                                         ramp_length_m=100.0), {str(cache)!r})
         t.start(["sumo", "-n", str(net.net_file), "-r", {str(rou)!r}, "--no-step-log", "true",

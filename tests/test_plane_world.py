@@ -13,7 +13,7 @@ from controllers.flocking import OlfatiSaberController
 from controllers.observation import Circles, InvalidStateError, Walls
 from controllers.params import FlockingParams
 from controllers.references import VirtualLeader
-from cosim.flock_metrics import (
+from cosim.metrics.flock import (
     average_nn_distance,
     connectivity,
     deviation_energy,
@@ -25,7 +25,7 @@ from cosim.flock_metrics import (
     velocity_alignment,
     velocity_mismatch,
 )
-from cosim.plane import PlaneResult, PlaneWorld
+from cosim.plane.world import PlaneResult, PlaneWorld
 
 
 class ConstantLaw:

@@ -10,9 +10,9 @@ import pytest
 
 CODE = r"""
 import json, sys, dataclasses
-from cosim.cli import builtin_scenarios
-from cosim.config import load_scenario
-from cosim.runner import run_scenario
+from cosim.cli.main import builtin_scenarios
+from cosim.config.scenario import load_scenario
+from cosim.sim.runner import run_scenario
 sc = load_scenario(builtin_scenarios()[sys.argv[1]])
 sc = dataclasses.replace(sc, scenario=dataclasses.replace(
     sc.scenario, duration_s=90.0, warmup_s=30.0, interval_s=30.0))

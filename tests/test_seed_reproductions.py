@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from controllers.constraints import ConstrainedController, SpeedSaturation
-from cosim.plane_scenarios import (
+from cosim.plane.scenarios import (
     SCENARIOS,
     run_plane_scenario,
     seed000_params,

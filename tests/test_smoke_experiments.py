@@ -31,7 +31,7 @@ def test_seed_experiment_smoke_writes_csv_and_png(tmp_path, script):
 
 @pytest.mark.parametrize("name", ["seed000", "seed001"])
 def test_plane_reproduction_command_writes_outputs(tmp_path, name):
-    _run([sys.executable, "-m", "cosim.cli", "plane", name, "--duration", "2", "--plot",
+    _run([sys.executable, "-m", "cosim.cli.main", "plane", name, "--duration", "2", "--plot",
           "--out", str(tmp_path)])
     metrics = pd.read_csv(tmp_path / "metrics.csv")
     assert metrics["t_s"].iloc[-1] == pytest.approx(2.0)
@@ -44,7 +44,7 @@ def test_plane_reproduction_command_writes_outputs(tmp_path, name):
 )
 def test_shipped_sweep_smoke_runs_every_point_ok(tmp_path, sweep):
     out = tmp_path / sweep
-    _run([sys.executable, "-m", "cosim.cli", "sweep", sweep, "--smoke", "--out", str(out),
+    _run([sys.executable, "-m", "cosim.cli.main", "sweep", sweep, "--smoke", "--out", str(out),
           "--quiet"], timeout=900.0)
     rows = pd.read_csv(out / "results.csv")
     assert len(rows) >= 1

@@ -15,8 +15,8 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from cosim import sweep as sw
 from cosim.errors import ConfigError
+from cosim.sweeps import sweep as sw
 
 TINY = """
 seeds = [1]
@@ -244,7 +244,7 @@ def test_results_frame_puts_keys_parameters_and_versions_first():
 def test_parsers_register_subcommands():
     ap = argparse.ArgumentParser(prog="cosim")
     sub = ap.add_subparsers(dest="command", required=True)
-    from cosim.analysis import add_analyse_parser
+    from cosim.analysis.analysis import add_analyse_parser
 
     sw.add_sweep_parser(sub)
     add_analyse_parser(sub)
@@ -318,7 +318,7 @@ def test_a_dying_worker_loses_no_finished_run_and_resume_completes(
         assert (out / "runs" / i / "row.csv").stat().st_mtime_ns == mtimes[i]
 
     # and the analysis reads the real run folders
-    from cosim.analysis import main as analyse_main
+    from cosim.analysis.analysis import main as analyse_main
 
     assert analyse_main([str(out), "--no-figures"]) == 0
     iv = pd.read_csv(out / "analysis" / "fd_intervals.csv")

@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from cosim.traffic_metrics import (
+from cosim.metrics.traffic import (
     StepState,
     TrafficRecorder,
     gaps,

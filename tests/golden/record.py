@@ -75,8 +75,8 @@ def _plain(v):
 
 def run_case(name: str) -> dict:
     """Run one case in this process; its summary values for KEYS."""
-    from cosim.config import scenario_from_dict
-    from cosim.runner import run_scenario
+    from cosim.config.scenario import scenario_from_dict
+    from cosim.sim.runner import run_scenario
 
     spec = json.loads(json.dumps(CASES[name]))
     res = run_scenario(scenario_from_dict(spec))
@@ -86,7 +86,7 @@ def run_case(name: str) -> dict:
 
 def run_plane(name: str) -> dict:
     """Final-row metrics of a plane-world seed reproduction."""
-    from cosim.plane_scenarios import run_plane_scenario
+    from cosim.plane.scenarios import run_plane_scenario
 
     res = run_plane_scenario(name)
     last = res.metrics.iloc[-1].to_dict()

@@ -1,4 +1,4 @@
-"""Run one scenario with :func:`cosim.runner.run_scenario` (one per process).
+"""Run one scenario with :func:`cosim.sim.runner.run_scenario` (one per process).
 
 Usage: ``python run_case.py OUT_DIR SCENARIO_JSON``; ``SCENARIO_JSON`` is the nested
 dict :func:`cosim.config.scenario_from_dict` takes. Prints one line ``RESULT <json>``:
@@ -14,8 +14,8 @@ import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from cosim.config import scenario_from_dict
-from cosim.runner import run_scenario
+from cosim.config.scenario import scenario_from_dict
+from cosim.sim.runner import run_scenario
 
 
 def _plain(v):

@@ -1,4 +1,4 @@
-"""SUMO cases that drive :class:`cosim.sumo_world.SumoWorld` directly (one case per process).
+"""SUMO cases that drive :class:`cosim.sumo.world.SumoWorld` directly (one case per process).
 
 Usage: ``python world_cases.py CASE``; prints one line ``RESULT <json>`` on stdout.
 libsumo holds one simulation per process, so the tests run every case in its own
@@ -18,10 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim.demand import DemandSpec, write_routes
-from cosim.network_build import NetworkSpec, build_network
-from cosim.sumo_world import SumoWorld
-from cosim.traffic_metrics import StepState, TrafficRecorder, gaps, overlapping_pairs
+from cosim.demand.routes import write_routes
+from cosim.demand.spec import DemandSpec
+from cosim.metrics.traffic import StepState, TrafficRecorder, gaps, overlapping_pairs
+from cosim.road.build import build_network
+from cosim.road.spec import NetworkSpec
+from cosim.sumo.world import SumoWorld
 
 DT = 0.1
 CAR_L = 4.5
@@ -75,7 +77,7 @@ def _straight_world(vehicles, length_m: float = 300.0) -> SumoWorld:
 
 
 def _step_state(world: SumoWorld, va) -> StepState:
-    """The recorder's input built exactly as cosim.runner._loop builds it."""
+    """The recorder's input built exactly as cosim.sim.runner._loop builds it."""
     idx = np.flatnonzero(va.on_main)
     er, el = world.net.edges_at(va.s[idx])
     return StepState(

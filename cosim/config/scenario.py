@@ -29,10 +29,9 @@ from pathlib import Path
 from typing import Any
 
 from controllers.params import FlockingParams
-
-from .demand import DemandSpec
-from .errors import ConfigError
-from .network_build import NetworkSpec
+from cosim.demand.spec import DemandSpec
+from cosim.errors import ConfigError
+from cosim.road.spec import NetworkSpec
 
 # "flocking": Olfati-Saber with the road extensions; "boundary_points": seed 003's law
 # (others and road edges seen as boundary points); "sumo": SUMO drives the CAVs (baseline).
@@ -324,7 +323,7 @@ class OutputSpec:
         cross_sections_m: positions of the flow cross-sections, m (empty: zone
             start, middle and end).
         ttc_threshold_s: ``TTC*`` of the time-to-collision exposure measures (TET,
-            TIT; :mod:`cosim.traffic_metrics`), s; 1.5 s as in FHWA's SSAM.
+            TIT; :mod:`cosim.metrics.traffic`), s; 1.5 s as in FHWA's SSAM.
     """
 
     trajectories: bool = False

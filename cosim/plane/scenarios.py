@@ -1,6 +1,6 @@
 """Reproductions of the seeds' experiments in the plane world.
 
-Each function builds a :class:`~cosim.plane.PlaneWorld` with the seed's
+Each function builds a :class:`~cosim.plane.world.PlaneWorld` with the seed's
 parameters; ``run_plane_scenario(name)`` runs it. From the shell:
 ``cosim plane seed000`` or ``cosim plane seed001 --saturation 10``.
 """
@@ -16,8 +16,7 @@ from controllers.flocking import OlfatiSaberController
 from controllers.observation import Circles, Walls
 from controllers.params import FlockingParams
 from controllers.references import VirtualLeader
-
-from .plane import PlaneResult, PlaneWorld
+from cosim.plane.world import PlaneResult, PlaneWorld
 
 
 def seed000_params() -> FlockingParams:

@@ -111,12 +111,12 @@ def plot_fundamental_diagram(
     Args:
         runs: one row per run with ``edie_density_vpkm``, ``edie_flow_vph``,
             ``space_mean_speed_mps``, the series columns and the demand column
-            (:func:`cosim.analysis.fd_runs`).
+            (:func:`cosim.analysis.analysis.fd_runs`).
         out_path: PNG file to write.
         series_cols: columns that define a curve.
         demand_col: the demand level; curves join the seed-means per level (in order of
             demand). Without it, the curve joins the runs sorted by density.
-        intervals: per-interval points (:func:`cosim.analysis.fd_intervals`), drawn faint.
+        intervals: per-interval points (:func:`cosim.analysis.analysis.fd_intervals`), drawn faint.
     """
     series_cols = [c for c in series_cols if c in runs]
     style = _styles(runs, series_cols)

@@ -18,8 +18,7 @@ import numpy as np
 import pandas as pd
 
 from controllers.observation import Circles, Observation, Walls
-
-from .flock_metrics import flock_metrics
+from cosim.metrics.flock import flock_metrics
 
 INTEGRATORS = ("euler", "semi_implicit")
 

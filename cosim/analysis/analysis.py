@@ -1,7 +1,7 @@
 """Analyse a sweep's results: fundamental diagrams, capacity, safety, boundary, flock tables.
 
 Input: a sweep output directory (``results.csv``, ``sweep.json``, ``runs/<run_id>/``; see
-:mod:`cosim.sweep`). Only ``ok`` runs enter the statistics; failed runs are listed.
+:mod:`cosim.sweeps.sweep`). Only ``ok`` runs enter the statistics; failed runs are listed.
 
 A **series** is one curve of the fundamental diagram: a CAV share and a controller
 (``demand.cav_share``, ``controller.kind``), plus the variant and any other swept
@@ -27,7 +27,7 @@ Tables (CSV and Markdown, in ``RESULTS_DIR/analysis/``):
   controller clip rates;
 * ``failed``: failed runs and their reasons.
 
-``report.md`` collects them; figures go to ``analysis/figures/`` (:mod:`cosim.figures`).
+``report.md`` collects them; figures go to ``analysis/figures/`` (:mod:`cosim.analysis.figures`).
 """
 
 from __future__ import annotations
@@ -43,8 +43,8 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # numpy and pandas are imported where used: `cosim --help` stays fast
     import pandas as pd
 
-from .cli_errors import run_command
-from .errors import ConfigError
+from cosim.cli.errors import run_command
+from cosim.errors import ConfigError
 
 DEMAND_COLUMNS = ("demand.inflow_vph", "demand.ring_density_vpkm")
 #: Always part of a series (the brief: one curve per CAV share and controller).
@@ -344,7 +344,7 @@ def safety_table(res: SweepResults) -> pd.DataFrame:
     (``collisions_sumo_*``, one entry per step of overlap) is empty when a run set
     ``outputs.sumo_collisions = false``.
 
-    Time to collision (:mod:`cosim.traffic_metrics`): ``min_ttc_s_min`` over all runs;
+    Time to collision (:mod:`cosim.metrics.traffic`): ``min_ttc_s_min`` over all runs;
     ``tet_share`` = Minderhoud & Bovy's time exposed below ``TTC*`` (summed over seeds)
     / the measured vehicle-time, the share of vehicle-time spent closing in on a leader
     with TTC at most ``TTC*``; ``tit_veh_s2_sum`` their time-integrated TTC.
@@ -586,7 +586,7 @@ def cmd_analyse(ns: argparse.Namespace) -> int:
     if not root.exists():
         raise ConfigError(f"no such folder: {root}")
     if root.is_dir() and not (root / "results.csv").is_file() and (root / "summary.csv").is_file():
-        from .figures import plot_run  # a single run's folder (cosim run --out ...)
+        from cosim.analysis.figures import plot_run
 
         out = Path(ns.out) if ns.out else root / "analysis"
         if not (root / "trajectories.csv").is_file():

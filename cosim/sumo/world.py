@@ -23,8 +23,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import SumoStartError
-from .network_build import RoadNetwork
+from cosim.errors import SumoStartError
+from cosim.road.frame import RoadNetwork
 
 _VARS = None
 

@@ -12,12 +12,11 @@ import sys
 from datetime import datetime
 from pathlib import Path
 
-from .analysis import add_analyse_parser
-from .cli_errors import run_command
-from .errors import CosimError
-from .sweep import add_sweep_parser
-
-SCENARIO_DIR = Path(__file__).resolve().parents[1] / "experiments" / "scenarios"
+from cosim.analysis.analysis import add_analyse_parser
+from cosim.cli.errors import run_command
+from cosim.config.builtins import builtin_scenarios
+from cosim.errors import CosimError
+from cosim.sweeps.sweep import add_sweep_parser
 
 SUMMARY_KEYS = [
     ("edie_flow_vph", "flow (Edie, zone)", "veh/h", "{:.0f}"),
@@ -42,13 +41,10 @@ SUMMARY_KEYS = [
 ]
 
 
-def builtin_scenarios() -> dict[str, Path]:
-    """Built-in scenario files by name (``experiments/scenarios/*.toml``)."""
-    return {p.stem: p for p in sorted(SCENARIO_DIR.glob("*.toml"))}
 
 
 def _resolve_scenario(arg: str | None):
-    from .config import default_scenario, load_scenario
+    from cosim.config.scenario import default_scenario, load_scenario
 
     if arg is None:
         return default_scenario()
@@ -81,7 +77,7 @@ def format_summary(row: dict) -> str:
 
 
 def cmd_run(ns) -> int:
-    from .runner import run_scenario
+    from cosim.sim.runner import run_scenario
 
     sc = _resolve_scenario(ns.scenario)
     if ns.seed is not None:
@@ -112,7 +108,7 @@ def cmd_list(ns) -> int:
         except Exception:
             desc = "(unreadable)"
         print(f"  {name:<22} {desc}")
-    from .plane_scenarios import SCENARIOS
+    from cosim.plane.scenarios import SCENARIOS
 
     print("plane-world reproductions (cosim plane NAME):")
     for name in SCENARIOS:
@@ -121,7 +117,7 @@ def cmd_list(ns) -> int:
 
 
 def cmd_plane(ns) -> int:
-    from .plane_scenarios import SCENARIOS, run_plane_scenario
+    from cosim.plane.scenarios import SCENARIOS, run_plane_scenario
 
     if ns.name not in SCENARIOS:
         raise CosimError(f"unknown plane scenario {ns.name!r}; choose from {sorted(SCENARIOS)}")
@@ -136,7 +132,7 @@ def cmd_plane(ns) -> int:
     m = res.metrics
     print(m.iloc[[0, len(m) // 2, -1]].T.to_string())
     if ns.plot:
-        from .plots import plot_plane_result
+        from cosim.plane.plots import plot_plane_result
 
         for p in plot_plane_result(res, out):
             print(f"figure: {p}")

@@ -23,16 +23,17 @@ from controllers.flocking import OlfatiSaberController
 from controllers.observation import Observation
 from controllers.road_reference import leader_gaps, reference_reach_m, time_gap_speed
 from controllers.safety import RoadState, SafetyConfig, SafetyLayer
-
-from . import __version__
-from .config import Scenario
-from .demand import write_detectors, write_routes
-from .errors import ConfigError, CosimError, SumoStartError
-from .flock_metrics import flock_metrics
-from .network_build import build_network, sumo_version
-from .sumo_world import SumoWorld
-from .toml_write import dumps_toml
-from .traffic_metrics import StepState, TrafficRecorder
+from cosim import __version__
+from cosim.config.scenario import Scenario
+from cosim.config.toml_write import dumps_toml
+from cosim.demand.routes import write_routes
+from cosim.errors import ConfigError, CosimError, SumoStartError
+from cosim.metrics.flock import flock_metrics
+from cosim.metrics.traffic import StepState, TrafficRecorder
+from cosim.road.build import build_network
+from cosim.sumo.binaries import sumo_version
+from cosim.sumo.detectors import write_detectors
+from cosim.sumo.world import SumoWorld
 
 FLOCK_SAMPLE_S = 1.0  # s between flock-metric samples
 

@@ -40,7 +40,7 @@ Output directory (``--out``, default ``outputs/sweeps/<name>[_smoke]``)::
     results.csv           one row per grid point run so far (rebuilt atomically after
                           every completion from the row files)
     runs/<run_id>/        the run's outputs (summary.csv, intervals.csv, ...; see
-                          cosim.runner) and, written last and atomically, row.csv
+                          cosim.sim.runner) and, written last and atomically, row.csv
 
 ``run_id`` is a hash of the resolved scenario (every parameter, seed included), so the
 same grid point always gets the same directory and ``--resume`` runs only the points
@@ -49,7 +49,7 @@ every swept parameter and a few descriptors (``network.kind``, ``demand.cav_shar
 ``controller.kind``, the demand level, ...) by dotted path, ``seed``, the versions
 (``cosim_version``, ``sumo_version``, ...), ``wall_time_s`` (whole task, s),
 ``sim_wall_time_s`` (the run itself, s), then the run's summary metrics
-(cosim.runner / cosim.traffic_metrics; units in the names).
+(cosim.sim.runner / cosim.metrics.traffic; units in the names).
 
 Execution: one process per run, because libsumo holds one simulation per process.
 Locally a ``ProcessPoolExecutor`` (spawn, ``max_tasks_per_child=1``; ``--start-method
@@ -90,15 +90,13 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .cli_errors import run_command
-from .errors import ConfigError, CosimError
+from cosim.cli.errors import run_command
+from cosim.config.builtins import scenario_dir, sweep_dir
+from cosim.errors import ConfigError, CosimError
 
-if TYPE_CHECKING:  # cosim.config (numpy, ...) is imported where used: the CLI stays fast
-    from .config import Scenario
+if TYPE_CHECKING:  # cosim.config.scenario (numpy, ...) is imported where used: the CLI stays fast
+    from cosim.config.scenario import Scenario
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
-SWEEP_DIR = REPO_ROOT / "experiments" / "sweeps"
-SCENARIO_DIR = REPO_ROOT / "experiments" / "scenarios"
 
 #: Test-only hook: a worker whose run id is listed here (comma-separated) calls
 #: ``os._exit(1)`` right after starting, as if the process had been killed.
@@ -214,10 +212,10 @@ def resolve_sweep_file(arg: str | Path) -> Path:
     path = Path(arg)
     if path.is_file():
         return path
-    named = SWEEP_DIR / f"{arg}.toml"
+    named = sweep_dir() / f"{arg}.toml"
     if path.suffix != ".toml" and named.is_file():
         return named
-    known = ", ".join(sorted(p.stem for p in SWEEP_DIR.glob("*.toml")))
+    known = ", ".join(sorted(p.stem for p in sweep_dir().glob("*.toml")))
     raise ConfigError(f"no sweep file or built-in sweep named {str(arg)!r} (built-in: {known})")
 
 
@@ -236,7 +234,7 @@ def load_sweep(path: str | Path, smoke: bool = False) -> SweepPlan:
 
 def sweep_from_dict(data: dict, source: Path | None = None, smoke: bool = False) -> SweepPlan:
     """Build and validate a :class:`SweepPlan` from a parsed sweep file."""
-    from .config import scenario_from_dict
+    from cosim.config.scenario import scenario_from_dict
 
     _check_keys(data, _TOP_KEYS, "top level")
     head = data.get("sweep", {})
@@ -333,7 +331,7 @@ def run_id(sc: Scenario) -> str:
     a new option with a default is added to the scenario schema; any real change of the
     scenario (base file, overrides, axes) changes the id.
     """
-    from .config import Scenario
+    from cosim.config.scenario import Scenario
 
     diff = _diff(sc.to_dict(), Scenario().to_dict())
     blob = json.dumps(diff, sort_keys=True, default=str).encode()
@@ -407,8 +405,7 @@ def _variants(data: Any, where: str) -> list[dict[str, Any]]:
 def _check_path(path: str) -> None:
     """A dotted path must name a scenario parameter: section.key or controller.params.key."""
     from controllers.params import FlockingParams
-
-    from .config import _SECTION_TYPES
+    from cosim.config.scenario import _SECTION_TYPES
 
     parts = path.split(".")
     if parts[0] not in _SECTION_TYPES:
@@ -443,20 +440,20 @@ def _unflatten(flat: dict[str, Any]) -> dict:
 
 
 def _resolve_base(arg: Any, source: Path | None) -> tuple[Scenario, str]:
-    from .config import default_scenario
+    from cosim.config.scenario import default_scenario
 
     if arg is None:
         return default_scenario(), "default"
     if not isinstance(arg, str) or not arg:
         raise ConfigError(f"sweep.base must be a scenario name or path, got {arg!r}")
-    named = SCENARIO_DIR / f"{arg}.toml"
+    named = scenario_dir() / f"{arg}.toml"
     if not arg.endswith(".toml") and "/" not in arg and named.is_file():
         return _load_base(named), arg
     path = Path(arg).expanduser()
     if not path.is_absolute() and source is not None:
         path = source.parent / path
     if not path.is_file():
-        known = ", ".join(sorted(p.stem for p in SCENARIO_DIR.glob("*.toml")))
+        known = ", ".join(sorted(p.stem for p in scenario_dir().glob("*.toml")))
         raise ConfigError(
             f"sweep.base: no scenario file {str(path)!r} and no built-in scenario {arg!r} "
             f"(built-in: {known})"
@@ -465,7 +462,7 @@ def _resolve_base(arg: Any, source: Path | None) -> tuple[Scenario, str]:
 
 
 def _load_base(path: Path) -> Scenario:
-    from .config import load_scenario
+    from cosim.config.scenario import load_scenario
 
     try:
         return load_scenario(path)
@@ -608,8 +605,8 @@ def execute_task(task: RunTask) -> dict:
     row = dict(task.row_base)
     row.update(status="ok", error="")
     try:
-        from .config import scenario_from_dict
-        from .runner import run_scenario, versions
+        from cosim.config.scenario import scenario_from_dict
+        from cosim.sim.runner import run_scenario, versions
 
         row.update({f"{k}_version": v for k, v in versions().items()})
         row["host"] = socket.gethostname()
@@ -631,7 +628,7 @@ def execute_task(task: RunTask) -> dict:
 
 _SUBPROCESS_CODE = (
     "import json, sys\n"
-    "from cosim.sweep import RunTask, execute_task\n"
+    "from cosim.sweeps.sweep import RunTask, execute_task\n"
     "execute_task(RunTask(**json.loads(sys.stdin.read())))\n"
 )
 
@@ -657,7 +654,7 @@ def execute_task_isolated(task: RunTask) -> dict:
 
 def failed_row(task: RunTask, reason: str) -> dict:
     """A ``failed`` row for a run that could not report itself (its process died)."""
-    from .runner import versions
+    from cosim.sim.runner import versions
 
     row = dict(task.row_base)
     row.update(status="failed", error=reason)
@@ -684,7 +681,7 @@ def _mp_context(start_method: str):
                           f"got {start_method!r}")
     ctx = multiprocessing.get_context(start_method)
     if start_method == "forkserver":
-        ctx.set_forkserver_preload(["cosim.runner", "cosim.sweep"])
+        ctx.set_forkserver_preload(["cosim.sim.runner", "cosim.sweeps.sweep"])
     return ctx
 
 
@@ -937,7 +934,7 @@ def run_sweep(
 
 def _prebuild_networks(plan: SweepPlan, todo: set[str]) -> None:
     """Build each distinct network once, before any run (netconvert errors fail early)."""
-    from .network_build import build_network
+    from cosim.road.build import build_network
 
     specs = {p.scenario.network for p in plan.points if p.run_id in todo}
     for spec in specs:

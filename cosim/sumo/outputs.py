@@ -2,14 +2,14 @@
 
 These are the files :func:`cosim.demand.write_detectors` asks SUMO to write
 (``[outputs] sumo_detectors = true``): ``e1_<k>.xml`` per cross-section k and
-``edgedata.xml``. They let a run's own metrics (:mod:`cosim.traffic_metrics`)
+``edgedata.xml``. They let a run's own metrics (:mod:`cosim.metrics.traffic`)
 be checked against SUMO's on the same run.
 
 What SUMO's E1 attributes mean (SUMO 1.28; intervals are ``[begin, end)`` in
 simulation time, a step ``t -> t + dt`` belongs to the interval containing ``t``):
 
 * ``nVehEntered``: vehicles whose **front** passed the loop during the interval.
-  This is the quantity :class:`cosim.traffic_metrics.TrafficRecorder` counts at
+  This is the quantity :class:`cosim.metrics.traffic.TrafficRecorder` counts at
   its cross-sections (``flow_x<pos>_vph``).
 * ``nVehContrib``: vehicles that **completely passed** the loop (their back left
   it) during the interval; ``flow = nVehContrib * 3600 / (end - begin)``. It lags

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable
 
-from .errors import CosimError
+from cosim.errors import CosimError
 
 
 def run_command(func: Callable, ns, interrupted: str = "interrupted") -> int:

@@ -1,0 +1,7 @@
+"""``python -m cosim``: the command line."""
+
+import sys
+
+from cosim.cli.main import main
+
+sys.exit(main())

@@ -1,0 +1,287 @@
+"""TODO docstring."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from cosim.demand.spec import (
+    CAV_PREFIX,
+    CAV_TAU_S,
+    DEPART_EDGE_MARGIN_M,
+    HDV_PREFIX,
+    HDV_TAU_S,
+    MIN_GAP_LAT_M,
+    MIN_GAP_M,
+    RING_INITIAL_HEADWAY_S,
+    RING_LEADER_LATERAL_REACH_M,
+    RING_MIN_GAP_M,
+    VTYPE_MAX_SPEED_MPS,
+    DemandSpec,
+)
+from cosim.errors import ConfigError
+from cosim.road.frame import RoadNetwork
+
+
+@dataclass
+class _Vehicle:
+    """One vehicle to write (internal)."""
+
+    vid: str
+    vtype: str
+    route: str
+    depart: float
+    speed: float
+    factor: float
+    depart_pos: str
+    depart_lat: str | None
+    depart_lane: str
+    depart_speed: str
+    insertion_checks: str | None = None
+
+
+def arrival_times(
+    rate_vph: float, duration_s: float, process: str, rng: np.random.Generator
+) -> np.ndarray:
+    """Departure times (s) in [0, duration_s) for a stream of ``rate_vph`` veh/h."""
+    if rate_vph <= 0:
+        return np.zeros(0)
+    mean_h = 3600.0 / rate_vph
+    if process == "uniform":
+        n = int(math.ceil(duration_s / mean_h)) + 1
+        times = (np.arange(n) + rng.uniform()) * mean_h
+    else:
+        n_guess = int(duration_s / mean_h * 1.5) + 20
+        times = np.cumsum(rng.exponential(mean_h, size=n_guess))
+        while times[-1] < duration_s:
+            more = np.cumsum(rng.exponential(mean_h, size=n_guess)) + times[-1]
+            times = np.concatenate([times, more])
+    return times[times < duration_s]
+
+
+def _kinds(n: int, share: float, rng: np.random.Generator) -> np.ndarray:
+    """Boolean CAV mask for n vehicles: exactly round(share * n) True, at random places."""
+    is_cav = np.zeros(n, dtype=bool)
+    is_cav[rng.permutation(n)[: int(round(share * n))]] = True
+    return is_cav
+
+
+def _draw_common(n: int, demand: DemandSpec, rng: np.random.Generator):
+    """Kind mask, size class index and desired speed (m/s) for n vehicles."""
+    is_cav = _kinds(n, demand.cav_share, rng)
+    cls = rng.choice(len(demand.size_classes), size=n, p=demand.class_probabilities)
+    low, high = demand.desired_speed_mps
+    speed = rng.uniform(low, high, size=n)
+    return is_cav, cls, speed
+
+
+def _lateral(width_road: float, width_car: np.ndarray, how: str, rng: np.random.Generator):
+    """Lateral depart offsets (m) from the lane centre keeping the body inside the road."""
+    room = np.maximum(0.5 * width_road - 0.5 * width_car - DEPART_EDGE_MARGIN_M, 0.0)
+    if how == "center":
+        return np.zeros_like(width_car)
+    return rng.uniform(-1.0, 1.0, size=len(width_car)) * room
+
+
+def _open_stream(
+    net: RoadNetwork, demand: DemandSpec, rng: np.random.Generator,
+    origin: str, rate_vph: float, road_width: float,
+) -> list[_Vehicle]:
+    times = arrival_times(rate_vph, demand.duration_s, demand.arrivals, rng)
+    n = len(times)
+    is_cav, cls, speed = _draw_common(n, demand, rng)
+    widths = np.array([demand.size_classes[c][1] for c in cls])
+    lat = _lateral(road_width, widths, demand.depart_lateral, rng)
+    lanes = _depart_lanes(net, n, demand.depart_lateral, rng) if origin == "main" else None
+    slotted = demand.insertion == "slots" and origin == "main" and net.n_lanes == 1 and n > 0
+    if slotted:
+        lengths = np.array([demand.size_classes[c][0] for c in cls])
+        taus = np.where(is_cav, CAV_TAU_S, HDV_TAU_S)
+        times, lat, v_depart = _slot_schedule(times, road_width, widths, lengths, speed, demand,
+                                              taus)
+    out = []
+    for i in range(n):
+        kind = CAV_PREFIX if is_cav[i] else HDV_PREFIX
+        multi = lanes is not None and net.n_lanes > 1
+        out.append(
+            _Vehicle(
+                vid=f"{kind}.{origin}.{i}",
+                vtype=f"{kind}_{cls[i]}",
+                route=origin,
+                depart=round(float(times[i]), 2),
+                speed=float(speed[i]),
+                factor=float(speed[i]) / net.speed_limit_mps,
+                depart_pos="base",
+                depart_lat=None if multi else f"{lat[i]:.3f}",
+                depart_lane=str(lanes[i]) if multi else "0",
+                depart_speed=f"{v_depart[i]:.3f}" if slotted else demand.depart_speed,
+            )
+        )
+    return out
+
+
+def _slot_schedule(times: np.ndarray, road_width: float, widths: np.ndarray,
+                   lengths: np.ndarray, speeds: np.ndarray, demand: DemandSpec,
+                   taus: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Departure times (s), lateral offsets (m) and depart speeds (m/s) for slot insertion.
+
+    Slots are ``slot_spacing_m`` apart, centred on the road, as many as fit with
+    the widest car inside the edges. Each arrival takes the slot where it can
+    depart earliest; it departs no earlier than ``slot_headway_s`` after the
+    slot's previous vehicle, at no more than that vehicle's depart speed (it
+    then accelerates to its desired speed), and only once the gap is at least
+    ``s0 + v tau`` (standstill gap plus the vehicle's own reaction time ``taus``
+    (s) of travel: its vType's ``tau``, 0.5 s for CAVs and 1 s for human
+    drivers). Later departures are a queue, as at SUMO's own insertion.
+    Deterministic.
+    """
+    room = road_width - float(widths.max()) - 2 * DEPART_EDGE_MARGIN_M
+    k = max(1, int(room // demand.slot_spacing_m) + 1)
+    centres = (np.arange(k) - 0.5 * (k - 1)) * demand.slot_spacing_m
+    last_t = np.full(k, -np.inf)
+    last_v = np.ones(k)
+    last_len = np.zeros(k)
+    out_t = np.empty(len(times))
+    out_d = np.empty(len(times))
+    out_v = np.empty(len(times))
+    last_v[:] = np.inf
+    t_prev = -np.inf
+    s0 = MIN_GAP_M
+    for n, t in enumerate(times):
+        v = np.minimum(float(speeds[n]), last_v)  # never faster than the slot's leader
+        need = s0 + v * float(taus[n]) + last_len
+        earliest = np.maximum(last_t + demand.slot_headway_s,
+                              last_t + need / np.where(np.isfinite(last_v), last_v, 1.0))
+        earliest = np.maximum(earliest, max(float(t), t_prev))
+        # Earliest departure first; among equal times the fastest allowed speed.
+        slot = int(np.lexsort((-v, np.round(earliest, 6)))[0])
+        depart = float(earliest[slot])
+        last_t[slot], last_v[slot], last_len[slot] = depart, float(v[slot]), float(lengths[n])
+        t_prev = depart
+        out_t[n] = depart
+        out_d[n] = centres[slot]
+        out_v[n] = float(v[slot])
+    return out_t, out_d, out_v
+
+
+def _depart_lanes(net: RoadNetwork, n: int, how: str, rng: np.random.Generator) -> np.ndarray:
+    if net.n_lanes <= 1:
+        return np.zeros(n, dtype=int)
+    if how == "center":
+        return np.full(n, net.n_lanes // 2, dtype=int)
+    return rng.integers(0, net.n_lanes, size=n)
+
+
+def _ring_slots(width_road: float, max_car_width: float) -> int:
+    """Number of lateral slots of width >= car width + lateral gap across the road."""
+    return max(1, int(width_road // (max_car_width + MIN_GAP_LAT_M)))
+
+
+def _ring_even(
+    n: int, length: float, width_road: float, lengths: np.ndarray, widths: np.ndarray,
+    density: float, rng: np.random.Generator,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Equal spacing in s, vehicle i in lateral slot i mod m (a staggered lattice)."""
+    m = _ring_slots(width_road, float(widths.max()))
+    spacing = length / n
+    if m * spacing < lengths.max() + RING_MIN_GAP_M:
+        max_density = 1000.0 * m / (lengths.max() + RING_MIN_GAP_M)
+        raise ConfigError(
+            f"demand.ring_density_vpkm={density} is too high for even placement on a "
+            f"{width_road:.1f} m wide ring (at most {max_density:.0f} veh/km)"
+        )
+    s = rng.uniform(0.0, spacing) + spacing * np.arange(n)
+    slot_w = width_road / m
+    centres = -0.5 * width_road + (np.arange(n) % m + 0.5) * slot_w
+    room = np.maximum(0.5 * (slot_w - widths - MIN_GAP_LAT_M), 0.0)
+    d = centres + rng.uniform(-1.0, 1.0, size=n) * room
+    return s, d
+
+
+def _ring_random(
+    n: int, length: float, width_road: float, lengths: np.ndarray, widths: np.ndarray,
+    density: float, rng: np.random.Generator, max_tries: int = 2000,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Random sequential placement of non-overlapping rectangles (centre s, d)."""
+    s = np.empty(n)
+    d = np.empty(n)
+    for i in range(n):
+        for _ in range(max_tries):
+            room = 0.5 * width_road - 0.5 * widths[i] - DEPART_EDGE_MARGIN_M
+            cs, cd = rng.uniform(0.0, length), rng.uniform(-room, room)
+            ds = np.abs(cs - s[:i])
+            ds = np.minimum(ds, length - ds)
+            clash = (ds < 0.5 * (lengths[i] + lengths[:i]) + RING_MIN_GAP_M) & (
+                np.abs(cd - d[:i]) < 0.5 * (widths[i] + widths[:i]) + MIN_GAP_LAT_M
+            )
+            if not clash.any():
+                s[i], d[i] = cs, cd
+                break
+        else:
+            raise ConfigError(
+                f"demand.ring_density_vpkm={density} is too high for random placement "
+                f"(no free spot for vehicle {i + 1} of {n}); use ring_placement='even'"
+            )
+    return s, d
+
+
+def _min_leader_gap(
+    s: np.ndarray, d: np.ndarray, lengths: np.ndarray, widths: np.ndarray, period: float
+) -> float:
+    """Smallest bumper gap (m) from any vehicle to a leader within lateral reach (periodic s)."""
+    ds = np.mod(s[None, :] - s[:, None], period)  # [i, j]: how far j is ahead of i
+    gap = ds - 0.5 * (lengths[None, :] + lengths[:, None])
+    near = np.abs(d[None, :] - d[:, None]) < (
+        0.5 * (widths[None, :] + widths[:, None]) + RING_LEADER_LATERAL_REACH_M
+    )
+    np.fill_diagonal(near, False)
+    near &= gap >= 0.0  # side-by-side neighbours are not leaders
+    return float(gap[near].min()) if near.any() else float("inf")
+
+
+def ring_route_repeat(net: RoadNetwork, duration_s: float) -> int:
+    """``repeat`` count so a vehicle at the vType max speed circles for ``duration_s``."""
+    return int(math.ceil(duration_s * VTYPE_MAX_SPEED_MPS / net.length_m)) + 1
+
+
+def _ring_vehicles(net: RoadNetwork, demand: DemandSpec, rng: np.random.Generator):
+    n = int(round(demand.ring_density_vpkm * net.length_m / 1000.0))
+    if n < 1:
+        raise ConfigError(
+            f"demand.ring_density_vpkm={demand.ring_density_vpkm} puts no vehicle on a "
+            f"{net.length_m:.0f} m ring"
+        )
+    is_cav, cls, speed = _draw_common(n, demand, rng)
+    lengths = np.array([demand.size_classes[c][0] for c in cls])
+    widths = np.array([demand.size_classes[c][1] for c in cls])
+    place = _ring_even if demand.ring_placement == "even" else _ring_random
+    centre_s, d = place(n, net.length_m, net.width_m, lengths, widths,
+                        demand.ring_density_vpkm, rng)
+    order = np.argsort(np.mod(centre_s + 0.5 * lengths, net.length_m), kind="stable")
+    v_init = demand.ring_initial_speed_mps
+    if v_init is None:
+        gap = _min_leader_gap(centre_s, d, lengths, widths, net.length_m)
+        v_init = min(demand.desired_speed_mps[0], gap / RING_INITIAL_HEADWAY_S)
+    out = []
+    for k, i in enumerate(order):
+        edge, pos = net.locate(float(centre_s[i] + 0.5 * lengths[i]))  # SUMO: front bumper
+        kind = CAV_PREFIX if is_cav[i] else HDV_PREFIX
+        v0 = float(speed[i])
+        out.append(
+            _Vehicle(
+                vid=f"{kind}.ring.{k}",
+                vtype=f"{kind}_{cls[i]}",
+                route=f"ring.{edge}",
+                depart=0.0,
+                speed=v0,
+                factor=v0 / net.speed_limit_mps,
+                depart_pos=f"{pos:.3f}",
+                depart_lat=f"{d[i]:.3f}",
+                depart_lane="0",
+                depart_speed=f"{v_init:.3f}",
+                insertion_checks="none",
+            )
+        )
+    return out

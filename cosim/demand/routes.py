@@ -1,0 +1,181 @@
+"""TODO docstring."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from cosim.demand.plan import _open_stream, _ring_vehicles, _Vehicle, ring_route_repeat
+from cosim.demand.spec import (
+    ACCEL_MPS2,
+    CAV_PREFIX,
+    CAV_TAU_S,
+    DECEL_MPS2,
+    EMERGENCY_DECEL_MPS2,
+    HDV_PREFIX,
+    HDV_SIGMA,
+    HDV_TAU_S,
+    MAX_SPEED_LAT_MPS,
+    MIN_GAP_LAT_M,
+    MIN_GAP_M,
+    VTYPE_MAX_SPEED_MPS,
+    DemandSpec,
+)
+from cosim.road.frame import RoadNetwork
+
+
+@dataclass(frozen=True)
+class RouteInfo:
+    """What :func:`write_routes` wrote.
+
+    Attributes:
+        path: the route file.
+        seed: the seed used.
+        n_cav, n_hdv: vehicles of each kind (all origins).
+        n_main, n_ramp, n_ring: vehicles per origin.
+        vehicle_ids: all vehicle ids in departure order.
+        cav_ids: ids of the CAVs.
+        ring_vehicle_ids: ids of the vehicles placed on the ring at t=0 (ring only).
+        arrival_process: "poisson", "uniform" or "ring_initial" (all at t=0).
+        desired_speed_mps: desired speed (m/s) per vehicle id.
+        ring_density_vpkm: realised ring density n / circumference, veh/km (ring only).
+        ring_route_repeat: the ``repeat`` count of the ring routes (ring only).
+        ring_initial_speed_mps: common speed of the ring vehicles at t=0 (ring only).
+    """
+
+    path: Path
+    seed: int
+    n_cav: int
+    n_hdv: int
+    n_main: int
+    n_ramp: int
+    n_ring: int
+    vehicle_ids: tuple[str, ...]
+    cav_ids: tuple[str, ...]
+    ring_vehicle_ids: tuple[str, ...]
+    arrival_process: str
+    desired_speed_mps: Mapping[str, float] = field(repr=False, compare=False)
+    ring_density_vpkm: float | None = None
+    ring_route_repeat: int | None = None
+    ring_initial_speed_mps: float | None = None
+
+
+def vtype_lines(demand: DemandSpec, lanes: bool) -> list[str]:
+    """``<vType>`` elements: ``cav_<k>`` and ``hdv_<k>`` for every size class.
+
+    ``lanes=False`` (lane-free road) gives SUMO's sublane model SL2015 with
+    ``latAlignment="arbitrary"``; ``lanes=True`` (three_lane baseline) gives LC2013.
+    """
+    out = []
+    # CAVs get a short reaction time ``tau`` so that SUMO's insertion check lets
+    # them enter at CAV headways (our controller drives them from the first step).
+    for kind, colour, sigma, tau in (
+        (CAV_PREFIX, "0,90,255", 0.0, CAV_TAU_S),
+        (HDV_PREFIX, "200,200,200", HDV_SIGMA, HDV_TAU_S),
+    ):
+        for k, (length, width, _p) in enumerate(demand.size_classes):
+            lc = (
+                'laneChangeModel="LC2013"'
+                if lanes
+                else f'laneChangeModel="SL2015" latAlignment="arbitrary" '
+                f'minGapLat="{MIN_GAP_LAT_M}" maxSpeedLat="{MAX_SPEED_LAT_MPS}"'
+            )
+            out.append(
+                f'    <vType id="{kind}_{k}" vClass="passenger" length="{length}" '
+                f'width="{width}" minGap="{MIN_GAP_M}" accel="{ACCEL_MPS2}" '
+                f'decel="{DECEL_MPS2}" emergencyDecel="{EMERGENCY_DECEL_MPS2}" '
+                f'maxSpeed="{VTYPE_MAX_SPEED_MPS}" speedDev="0" sigma="{sigma}" tau="{tau}" '
+                f'color="{colour}" {lc}>\n'
+                f'        <param key="cosim.kind" value="{kind}"/>\n'
+                f"    </vType>"
+            )
+    return out
+
+
+def _route_lines(net: RoadNetwork, repeat: int | None) -> list[str]:
+    if net.periodic:
+        return [
+            f'    <route id="ring.{e}" edges="{" ".join(net.ring_route_edges(e))}" '
+            f'repeat="{repeat}"/>'
+            for e in net.main_route
+        ]
+    lines = [f'    <route id="main" edges="{" ".join(net.main_route)}"/>']
+    if net.ramp_route:
+        lines.append(f'    <route id="ramp" edges="{" ".join(net.ramp_route)}"/>')
+    return lines
+
+
+def _vehicle_line(v: _Vehicle) -> str:
+    lat = f' departPosLat="{v.depart_lat}"' if v.depart_lat is not None else ""
+    checks = f' insertionChecks="{v.insertion_checks}"' if v.insertion_checks else ""
+    return (
+        f"    <vehicle id={quoteattr(v.vid)} type=\"{v.vtype}\" route=\"{v.route}\" "
+        f'depart="{v.depart:.2f}" departLane="{v.depart_lane}" departPos="{v.depart_pos}"'
+        f'{lat} departSpeed="{v.depart_speed}" speedFactor="{v.factor:.6f}"{checks}>\n'
+        f'        <param key="desiredSpeed" value="{v.speed:.4f}"/>\n'
+        f"    </vehicle>"
+    )
+
+
+def write_routes(net: RoadNetwork, demand: DemandSpec, seed: int, path: Path | str) -> RouteInfo:
+    """Write the vTypes, routes and vehicles of ``demand`` on ``net`` to ``path``.
+
+    Ring networks get ``ring_density_vpkm`` vehicles placed at t=0 (exact count
+    ``round(density * length)``), each on a route that starts on its edge and
+    repeats the loop (see :func:`ring_route_repeat`). Open roads get arrivals
+    on the main road and, on an on-ramp network, on the ramp.
+    """
+    rng = np.random.default_rng(seed)
+    path = Path(path)
+    repeat = None
+    if net.periodic:
+        vehicles = _ring_vehicles(net, demand, rng)
+        repeat = ring_route_repeat(net, demand.duration_s)
+        process = "ring_initial"
+    else:
+        vehicles = _open_stream(net, demand, rng, "main", demand.inflow_vph, float(net.width_at(0)))
+        if net.ramp_route and demand.ramp_inflow_vph > 0:
+            ramp_w = net.ramp_width_m or net.width_m
+            vehicles += _open_stream(net, demand, rng, "ramp", demand.ramp_inflow_vph, ramp_w)
+        vehicles.sort(key=lambda v: (v.depart, v.vid))
+        process = demand.arrivals
+    lines = ['<?xml version="1.0" encoding="UTF-8"?>', f"<!-- cosim demand, seed {seed} -->",
+             "<routes>"]
+    lines += vtype_lines(demand, lanes=net.n_lanes > 1)
+    lines += _route_lines(net, repeat)
+    lines += [_vehicle_line(v) for v in vehicles]
+    lines.append("</routes>")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+    return _route_info(path, seed, vehicles, process, net, repeat)
+
+
+def _route_info(
+    path: Path, seed: int, vehicles: list[_Vehicle], process: str, net: RoadNetwork,
+    repeat: int | None,
+) -> RouteInfo:
+    ids = tuple(v.vid for v in vehicles)
+    cavs = tuple(i for i in ids if i.startswith(CAV_PREFIX + "."))
+    origin = [i.split(".")[1] for i in ids]
+    n_ring = origin.count("ring")
+    return RouteInfo(
+        path=path,
+        seed=seed,
+        n_cav=len(cavs),
+        n_hdv=len(ids) - len(cavs),
+        n_main=origin.count("main"),
+        n_ramp=origin.count("ramp"),
+        n_ring=n_ring,
+        vehicle_ids=ids,
+        cav_ids=cavs,
+        ring_vehicle_ids=ids if net.periodic else (),
+        arrival_process=process,
+        desired_speed_mps={v.vid: v.speed for v in vehicles},
+        ring_density_vpkm=1000.0 * n_ring / net.length_m if net.periodic else None,
+        ring_route_repeat=repeat,
+        ring_initial_speed_mps=float(vehicles[0].depart_speed) if n_ring else None,
+    )

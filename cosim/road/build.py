@@ -1,0 +1,273 @@
+"""TODO docstring."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import shutil
+import subprocess
+import tempfile
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cosim.errors import NetworkError
+from cosim.road.frame import RoadNetwork, load_road_network
+from cosim.road.spec import RING_ARC_POINTS, RING_EDGES, NetworkSpec, _n_edges
+from cosim.sumo.binaries import netconvert_binary, sumo_version
+
+#: Bump when the generated geometry changes, so old cache entries are not reused.
+BUILDER_VERSION = 2
+
+
+#: Relative tolerance between the requested ring circumference and SUMO's lane length.
+RING_LENGTH_TOLERANCE = 0.01
+
+
+NET_FILE_NAME = "road.net.xml"
+
+
+SPEC_FILE_NAME = "spec.json"
+
+
+
+
+def default_cache_dir() -> Path:
+    """The network cache: ``$COSIM_NETWORK_CACHE``, else ``$XDG_CACHE_HOME/lanefree-cosim/networks``
+    (``~/.cache/lanefree-cosim/networks``): a per-user folder, never inside the installed
+    package, so a non-editable install works from any folder."""
+    env = os.environ.get("COSIM_NETWORK_CACHE")
+    if env:
+        return Path(env)
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "lanefree-cosim" / "networks"
+
+
+def _run_netconvert(nod: Path, edg: Path, out: Path, extra: Sequence[str] = ()) -> None:
+    """Run netconvert on plain-XML sources; NetworkError with its first error line on failure."""
+    cmd = [
+        str(netconvert_binary()),
+        "--node-files", str(nod),
+        "--edge-files", str(edg),
+        "--output-file", str(out),
+        "--no-turnarounds", "true",
+        "--offset.disable-normalization", "true",
+        "--output.street-names", "false",
+        *extra,
+    ]
+    proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    (out.parent / "netconvert.log").write_text(proc.stdout + proc.stderr)
+    if proc.returncode != 0 or not out.is_file():
+        lines = [ln.strip() for ln in proc.stderr.splitlines() if ln.strip()]
+        errors = [ln for ln in lines if ln.lower().startswith("error")]
+        first = (errors or lines or [f"exit code {proc.returncode}"])[0]
+        raise NetworkError(f"netconvert failed for {out.parent.name}: {first}")
+
+
+@dataclass
+class _Sources:
+    """Plain-XML node and edge lines plus the routes they define."""
+
+    nodes: list[str]
+    edges: list[str]
+    main_route: tuple[str, ...]
+    ramp_route: tuple[str, ...] | None = None
+    periodic: bool = False
+    netconvert_options: tuple[str, ...] = ()
+
+
+def _node(nid: str, x: float, y: float, ntype: str = "priority") -> str:
+    return f'    <node id="{nid}" x="{x:.3f}" y="{y:.3f}" type="{ntype}"/>'
+
+
+def _edge(
+    eid: str, frm: str, to: str, width: float, speed: float,
+    lanes: int = 1, priority: int = 2, shape: str | None = None,
+) -> str:
+    shape_attr = f' shape="{shape}"' if shape else ""
+    return (
+        f'    <edge id="{eid}" from="{frm}" to="{to}" numLanes="{lanes}" width="{width:.3f}"'
+        f' speed="{speed:.3f}" priority="{priority}" spreadType="center"{shape_attr}/>'
+    )
+
+
+def _sources_straight(spec: NetworkSpec) -> _Sources:
+    v = spec.speed_limit_mps
+    n = _n_edges(spec.length_m, spec.max_edge_length_m)
+    if n == 1:
+        return _Sources(
+            nodes=[_node("start", 0.0, 0.0, "dead_end"),
+                   _node("end", spec.length_m, 0.0, "dead_end")],
+            edges=[_edge("main", "start", "end", spec.width_m, v)],
+            main_route=("main",),
+        )
+    names = ["start", *(f"j{k}" for k in range(1, n)), "end"]
+    nodes = [
+        _node(name, spec.length_m * k / n, 0.0, "dead_end" if k in (0, n) else "priority")
+        for k, name in enumerate(names)
+    ]
+    route = tuple(f"main{k}" for k in range(n))
+    edges = [_edge(route[k], names[k], names[k + 1], spec.width_m, v) for k in range(n)]
+    # Without internal links vehicles step straight from one edge onto the next; with
+    # them every joint would add a 0.1 m junction lane (SUMO's minimum lane length).
+    return _Sources(nodes=nodes, edges=edges, main_route=route,
+                    netconvert_options=("--no-internal-links", "true"))
+
+
+def _sources_three_lane(spec: NetworkSpec) -> _Sources:
+    v = spec.speed_limit_mps
+    return _Sources(
+        nodes=[_node("start", 0.0, 0.0, "dead_end"), _node("end", spec.length_m, 0.0, "dead_end")],
+        edges=[_edge("main", "start", "end", spec.width_m / 3, v, lanes=3)],
+        main_route=("main",),
+    )
+
+
+def _sources_ring(spec: NetworkSpec) -> _Sources:
+    n = _n_edges(spec.circumference_m, spec.max_edge_length_m, minimum=RING_EDGES)
+    # The lanes are polygons of n * RING_ARC_POINTS chords; scale the radius so that the
+    # polygon (what SUMO measures), not the circle, has the requested circumference.
+    half_angle = math.pi / (n * RING_ARC_POINTS)
+    radius = spec.circumference_m / (2 * math.pi) * half_angle / math.sin(half_angle)
+    nodes, edges = [], []
+    for i in range(n):
+        a = 2 * math.pi * i / n
+        nodes.append(_node(f"r{i}", radius * math.cos(a), radius * math.sin(a)))
+    for i in range(n):
+        a0, a1 = 2 * math.pi * i / n, 2 * math.pi * (i + 1) / n
+        angles = np.linspace(a0, a1, RING_ARC_POINTS + 1)
+        shape = " ".join(f"{radius * math.cos(a):.4f},{radius * math.sin(a):.4f}" for a in angles)
+        edges.append(
+            _edge(f"ring{i}", f"r{i}", f"r{(i + 1) % n}", spec.width_m, spec.speed_limit_mps,
+                  shape=shape)
+        )
+    return _Sources(nodes, edges, tuple(f"ring{i}" for i in range(n)), periodic=True)
+
+
+def _sources_onramp(spec: NetworkSpec) -> _Sources:
+    v = spec.speed_limit_mps
+    th = math.radians(spec.ramp_angle_deg)
+    m = spec.merge_position_m
+    rx, ry = m - spec.ramp_length_m * math.cos(th), -spec.ramp_length_m * math.sin(th)
+    nodes = [
+        _node("start", 0.0, 0.0, "dead_end"),
+        _node("merge", m, 0.0, "zipper"),  # zipper: ramp and main traffic alternate
+        _node("end", spec.length_m, 0.0, "dead_end"),
+        _node("ramp_start", rx, ry, "dead_end"),
+    ]
+    edges = [
+        _edge("main_up", "start", "merge", spec.width_m, v, priority=2),
+        _edge("main_down", "merge", "end", spec.width_m, v, priority=2),
+        _edge("ramp", "ramp_start", "merge", spec.ramp_width_m, v, priority=1),
+    ]
+    return _Sources(nodes, edges, ("main_up", "main_down"), ramp_route=("ramp", "main_down"))
+
+
+def _sources_varying(spec: NetworkSpec) -> _Sources:
+    v = spec.speed_limit_mps
+    nodes = [_node("w0", 0.0, 0.0, "dead_end")]
+    edges = []
+    x = 0.0
+    last = len(spec.width_profile)
+    for i, (length, width) in enumerate(spec.width_profile):
+        x += length
+        nodes.append(_node(f"w{i + 1}", x, 0.0, "dead_end" if i + 1 == last else "priority"))
+        edges.append(_edge(f"seg{i}", f"w{i}", f"w{i + 1}", width, v))
+    return _Sources(nodes, edges, tuple(f"seg{i}" for i in range(last)))
+
+
+_SOURCE_BUILDERS = {
+    "straight": _sources_straight,
+    "three_lane": _sources_three_lane,
+    "ring": _sources_ring,
+    "onramp": _sources_onramp,
+    "varying_width": _sources_varying,
+}
+
+
+def spec_hash(spec: NetworkSpec) -> str:
+    """Hex digest (16 chars) of the kind's parameters, SUMO version and builder version."""
+    payload = {
+        "params": spec.cache_params(),
+        "sumo": sumo_version(),
+        "builder": BUILDER_VERSION,
+    }
+    blob = json.dumps(payload, sort_keys=True).encode()
+    return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def build_network(spec: NetworkSpec, cache_dir: Path | str | None = None) -> RoadNetwork:
+    """Build (or reuse from the cache) the network for ``spec`` and return its road frame.
+
+    Raises:
+        NetworkError: netconvert failed, or (kind ``file``) the file is missing or
+            unreadable, or the route's edges are not connected.
+    """
+    if spec.kind == "file":
+        return _load_user_network(spec)
+    root = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    target = root / f"{spec.kind}-{spec_hash(spec)}"
+    sources = _SOURCE_BUILDERS[spec.kind](spec)
+    if not (target / NET_FILE_NAME).is_file():
+        _build_into(target, spec, sources)
+    net = load_road_network(
+        target / NET_FILE_NAME,
+        kind=spec.kind,
+        main_route=sources.main_route,
+        ramp_route=sources.ramp_route,
+        periodic=sources.periodic,
+        speed_limit_mps=spec.speed_limit_mps,
+    )
+    if spec.kind == "ring":
+        _check_ring_length(net, spec)
+    return net
+
+
+def _build_into(target: Path, spec: NetworkSpec, sources: _Sources) -> None:
+    """Write sources and run netconvert in a temp dir, then move it into place atomically."""
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}-", dir=target.parent))
+    tmp.chmod(0o755)  # mkdtemp makes it private; the cache is shared
+    try:
+        nod, edg = tmp / "road.nod.xml", tmp / "road.edg.xml"
+        nod.write_text("<nodes>\n" + "\n".join(sources.nodes) + "\n</nodes>\n")
+        edg.write_text("<edges>\n" + "\n".join(sources.edges) + "\n</edges>\n")
+        _run_netconvert(nod, edg, tmp / NET_FILE_NAME, sources.netconvert_options)
+        meta = {"spec": asdict(spec), "sumo": sumo_version(), "builder": BUILDER_VERSION}
+        (tmp / SPEC_FILE_NAME).write_text(json.dumps(meta, indent=2, sort_keys=True))
+        try:
+            os.rename(tmp, target)
+        except OSError:
+            # Another process finished the same build first: keep theirs.
+            if not (target / NET_FILE_NAME).is_file():
+                raise
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _check_ring_length(net: RoadNetwork, spec: NetworkSpec) -> None:
+    rel = abs(net.length_m - spec.circumference_m) / spec.circumference_m
+    if rel > RING_LENGTH_TOLERANCE:
+        raise NetworkError(
+            f"ring built with circumference {net.length_m:.2f} m instead of "
+            f"{spec.circumference_m:.2f} m (more than {RING_LENGTH_TOLERANCE:.0%} off)"
+        )
+
+
+def _load_user_network(spec: NetworkSpec) -> RoadNetwork:
+    path = Path(str(spec.net_file)).expanduser()
+    if not path.is_file():
+        raise NetworkError(f"network file not found: {path}")
+    return load_road_network(
+        path,
+        kind="file",
+        main_route=spec.route_edges,
+        ramp_route=spec.ramp_edges or None,
+        periodic=False,
+        speed_limit_mps=None,
+    )
