@@ -23,13 +23,24 @@ Beyond the paper, for road vehicles:
   Minkowski sum of the two rectangles (so the gap is bumper to bumper) with the
   vehicle's own velocity;
 * road edges and walls are beta-agents at the projection (seed 000; seed 003
-  eq. 5) measured from the vehicle's side; an agent already beyond a wall is
-  still pushed back in.
+  eq. 5) measured from the vehicle's side; with a barrier floor (below) an
+  agent already beyond a wall is still pushed back in;
 * the repulsion ``phi_beta(z) n_hat(z)`` of the paper vanishes at contact
-  (``n_hat`` is proportional to ``z``); for walls, circles and vehicles the
-  gap is floored at the gap where that repulsion peaks, so the barrier is
-  monotone and at its largest for agents in contact, inside or past it (a
-  saturated barrier).
+  (``n_hat`` is proportional to ``z``), and for an agent past a wall or inside
+  a circle the beta-agent lies on the other side, so the paper's term pushes
+  it further out of the free space. ``FlockingParams.barrier_floor`` chooses:
+  "peak" (the default of FlockingParams) floors the gap of every wall, circle
+  and vehicle interaction at the gap where that repulsion peaks, so the
+  barrier is monotone and at its largest for agents in contact, inside or
+  past it (a saturated barrier; for seed 000's constants the floor covers
+  2.39 m of the 3 m edge range and 10.19 m of the 12 m obstacle range);
+  "none" is the paper's law exactly (``cosim plane seed000`` uses it); a
+  number floors every gap at that many m.
+
+With ``barrier_floor="none"``, isotropic spacing and point agents (no sensed
+vehicles, which the script lacks), the law equals seed 000's MATLAB appendix
+corrected for the first two points above, to rounding: 1e-11 m/s^2 on random
+states (tests/test_seed000_matlab.py).
 """
 
 from __future__ import annotations
@@ -103,11 +114,16 @@ class OlfatiSaberController:
         self.d_beta = float(sigma_norm_scalar(p.d_beta, eps))
         self.d_vehicle = float(sigma_norm_scalar(p.d_vehicle, eps))
         self.d_wall = float(sigma_norm_scalar(p.d_wall, eps))
-        # Gap (m) at which the beta repulsion |phi_beta(z) n_hat(z)| peaks: below it
-        # the gap is floored so the barrier is monotone (see module docstring).
-        self.wall_floor = self._repulsion_peak(p.d_wall, self.d_wall)
-        self.vehicle_floor = self._repulsion_peak(p.d_vehicle, self.d_vehicle)
-        self.circle_floor = self._repulsion_peak(p.d_beta, self.d_beta)
+        # Floors (m) on the beta gaps (see module docstring and FlockingParams.barrier_floor):
+        # "peak": the gap at which |phi_beta(z) n_hat(z)| peaks, so the barrier is monotone;
+        # "none": -inf, the paper's law; a number: that gap for every interaction.
+        if p.barrier_floor == "peak":
+            self.wall_floor = self._repulsion_peak(p.d_wall, self.d_wall)
+            self.vehicle_floor = self._repulsion_peak(p.d_vehicle, self.d_vehicle)
+            self.circle_floor = self._repulsion_peak(p.d_beta, self.d_beta)
+        else:
+            floor = -np.inf if p.barrier_floor == "none" else float(p.barrier_floor)
+            self.wall_floor = self.vehicle_floor = self.circle_floor = floor
         self.last_terms: FlockTerms | None = None
 
     def _repulsion_peak(self, d_m: float, d_sigma: float) -> float:
@@ -262,7 +278,8 @@ class OlfatiSaberController:
             return np.zeros((n, m))
         ak = a_k[ii, kk]
         # q_hat - q = (mu - 1)(q - y) = -a_k (||q - y|| - R); the signed gap is floored
-        # (agents inside the circle are pushed out along the outward normal a_k).
+        # (with a floor, agents inside the circle are pushed out along the outward normal a_k;
+        # without one, the paper's law pushes them towards the centre).
         signed = dist[ii, kk] - radius[kk]
         q_hat_rel = -ak * np.maximum(signed, self.circle_floor)[:, None]
         p_i = obs.p[ii]

@@ -9,6 +9,7 @@ spacing and interaction range), ``d_beta``/``r_beta`` (d' and r', obstacles),
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
@@ -25,6 +26,23 @@ def _gain_vector(value, name: str) -> tuple[float, ...]:
     if not np.all(np.isfinite(arr)) or np.any(arr < 0):
         raise ParameterError(f"{name} must be finite and >= 0, got {value!r}")
     return tuple(float(v) for v in arr)
+
+
+BARRIER_FLOORS = ("peak", "none")
+
+
+def _barrier_floor(value) -> str | float:
+    """``value`` if it is "peak" or "none", else a float gap > 0 in m; ParameterError otherwise."""
+    if isinstance(value, str):
+        if value in BARRIER_FLOORS:
+            return value
+    elif isinstance(value, numbers.Real) and not isinstance(value, bool):
+        v = float(value)
+        if math.isfinite(v) and v > 0.0:
+            return v
+    raise ParameterError(
+        f"barrier_floor must be 'peak', 'none' or a finite gap > 0 in m, got {value!r}"
+    )
 
 
 @dataclass(frozen=True)
@@ -52,6 +70,17 @@ class FlockingParams:
         dynamic_weights: seed 000's ``C(x, u) = x (tanh(u) + 1)`` applied to the
             gamma gains with the obstacle beta term ``u_beta`` per axis.
         neighbour_search: "auto", "kdtree" or "dense".
+        barrier_floor: floor on the gap of every beta interaction (walls, road
+            edges, circles, sensed vehicles). The paper's repulsion
+            ``phi_beta(z) n_hat(z)`` vanishes at contact (``n_hat`` is
+            proportional to the gap) and, past a wall or inside an obstacle,
+            pushes further out of the free space. "peak" (default) floors each
+            gap at the gap where that repulsion peaks (for seed 000's
+            constants: 2.39 m of the 3 m edge range, 10.19 m of the 12 m
+            obstacle range), a saturated barrier that is monotone and at its
+            largest in contact, inside or past; "none" is the paper's law
+            exactly; a number > 0 floors every gap at that many m (scaled m
+            for sensed vehicles when the spacing is anisotropic).
     """
 
     d: float = 6.0
@@ -80,8 +109,10 @@ class FlockingParams:
     gamma_position: str = "linear"
     dynamic_weights: bool = False
     neighbour_search: str = "auto"
+    barrier_floor: str | float = "peak"
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "barrier_floor", _barrier_floor(self.barrier_floor))
         for f in fields(self):
             v = getattr(self, f.name)
             if isinstance(v, float | int) and not isinstance(v, bool):

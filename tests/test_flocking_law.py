@@ -280,9 +280,11 @@ def test_wall_pushes_agents_near_it_inward(y):
     assert wall[0] == pytest.approx(0.0, abs=1e-12)  # tangential motion is not damped
 
 
-def wall_push(gap: float, normal_speed: float = 0.0, edges: bool = False) -> float:
+def wall_push(
+    gap: float, normal_speed: float = 0.0, edges: bool = False, floor: str | float = "peak"
+) -> float:
     """Inward wall/edge acceleration (m/s^2) on a point agent ``gap`` m inside a wall at y = 0."""
-    law = OlfatiSaberController(FlockingParams(**NO_GAMMA))
+    law = OlfatiSaberController(FlockingParams(**NO_GAMMA, barrier_floor=floor))
     q, p = [[0.0, gap]], [[0.0, -normal_speed]]
     if edges:
         obs = Observation(q=q, p=p, road_edges=[0.0, 100.0])
@@ -433,7 +435,7 @@ def test_vehicle_alongside_with_small_lateral_gap_is_pushed_sideways():
 
 def test_overlapping_vehicle_is_pushed_out_through_the_face_of_least_penetration():
     # Centres 4 m apart, lengths 4.5 m: 0.5 m longitudinal overlap, 1.8 m lateral overlap.
-    # Saturated barrier: the gap counts as d_vehicle / 2 = 1.5 m.
+    # Saturated barrier: the gap counts as the repulsion peak's gap (about 2.4 m).
     law = OlfatiSaberController(FlockingParams(**NO_GAMMA))
     law.compute(vehicle_obs(-4.0, 0.2))
     beta = law.last_terms.beta[0]
@@ -442,7 +444,7 @@ def test_overlapping_vehicle_is_pushed_out_through_the_face_of_least_penetration
 
 
 @pytest.mark.parametrize("gap", [1.0, 0.2])
-def test_vehicle_closer_than_half_d_vehicle_gets_the_saturated_push(gap):
+def test_vehicle_closer_than_the_repulsion_peak_gets_the_saturated_push(gap):
     law = OlfatiSaberController(FlockingParams(**NO_GAMMA))
     law.compute(vehicle_obs(-(4.5 + gap)))
     assert law.last_terms.beta[0, 0] == pytest.approx(-beta_push(PEAK, d=3.0, c1=100.0), rel=1e-5)
@@ -456,6 +458,75 @@ def test_vehicle_damping_matches_the_sensed_vehicle_velocity():
     same_speed = law.last_terms.beta[0, 0]
     law.compute(dataclasses.replace(obs, p=np.array([[15.0, 0.0]])))
     assert law.last_terms.beta[0, 0] == pytest.approx(same_speed - 20.0 * 5.0, rel=1e-12)
+
+
+# ---------------------------------------------------------------- barrier floor
+def test_default_barrier_floor_is_the_repulsion_peak():
+    assert FlockingParams().barrier_floor == "peak"
+    law = OlfatiSaberController(FlockingParams())
+    assert law.wall_floor == pytest.approx(PEAK, abs=2e-3)  # 2.39 m of d'' = 3 m
+    assert law.circle_floor == pytest.approx(peak_gap(12.0), abs=1e-2)  # 10.19 m of d' = 12 m
+
+
+@pytest.mark.parametrize("edges", [False, True])
+@pytest.mark.parametrize("gap", [2.8, 2.0, 1.0, 0.3])
+def test_without_floor_the_wall_push_is_the_paper_law_at_every_gap(gap, edges):
+    # The paper's c1'' |phi_beta| |n_hat|, also below the repulsion peak where "peak" floors it.
+    push = wall_push(gap, edges=edges, floor="none")
+    assert push == pytest.approx(beta_push(gap), rel=1e-12)
+    if gap < PEAK:
+        assert push < wall_push(gap, edges=edges) - 10.0
+
+
+@pytest.mark.parametrize("edges", [False, True])
+def test_without_floor_the_paper_law_vanishes_at_contact_and_pushes_out_past_the_edge(edges):
+    assert wall_push(0.0, edges=edges, floor="none") == 0.0
+    # Past the edge the beta-agent lies on the other side: the paper's term pushes outward.
+    for gap in (-0.5, -1.0):
+        push = wall_push(gap, edges=edges, floor="none")
+        assert push == pytest.approx(-beta_push(-gap), rel=1e-12)
+        assert push < 0.0
+
+
+@pytest.mark.parametrize("edges", [False, True])
+def test_numeric_floor_counts_smaller_gaps_as_the_floor(edges):
+    assert wall_push(0.5, edges=edges, floor=1.0) == pytest.approx(beta_push(1.0), rel=1e-12)
+    assert wall_push(-2.0, edges=edges, floor=1.0) == pytest.approx(beta_push(1.0), rel=1e-12)
+    assert wall_push(2.0, edges=edges, floor=1.0) == pytest.approx(beta_push(2.0), rel=1e-12)
+
+
+def test_without_floor_the_circle_push_is_the_paper_law():
+    # Gap 5 m to the R = 10 m surface: below the 10.19 m floor of "peak", so the two differ.
+    circles = Circles([[15.0, 0.0]], [10.0])
+    law = OlfatiSaberController(FlockingParams(**NO_GAMMA, barrier_floor="none"))
+    law.compute(Observation(q=[[0.0, 0.0]], p=[[0.0, 0.0]], circles=circles))
+    beta = law.last_terms.beta[0]
+    assert beta[0] == pytest.approx(-beta_push(5.0, d=12.0, c1=100.0), rel=1e-12)
+    assert beta[0] > -beta_push(peak_gap(12.0), d=12.0, c1=100.0) + 10.0
+    # Inside the circle the paper's beta-agent lies outward: the term pulls towards the centre.
+    law.compute(Observation(q=[[9.0, 0.0]], p=[[0.0, 0.0]], circles=Circles([[0.0, 0.0]], [10.0])))
+    assert law.last_terms.beta[0, 0] == pytest.approx(-beta_push(1.0, d=12.0, c1=100.0), rel=1e-12)
+
+
+def test_without_floor_the_vehicle_push_is_the_paper_law():
+    law = OlfatiSaberController(FlockingParams(**NO_GAMMA, barrier_floor="none"))
+    law.compute(vehicle_obs(-6.5))  # bumpers 2 m apart
+    assert law.last_terms.beta[0, 0] == pytest.approx(-beta_push(2.0, d=3.0, c1=100.0), rel=1e-12)
+
+
+@pytest.mark.parametrize("value", ["peak", "none", 2.5, 1, np.float64(0.5)])
+def test_barrier_floor_accepts_peak_none_and_positive_gaps(value):
+    got = FlockingParams(barrier_floor=value).barrier_floor
+    assert got == value
+    assert isinstance(got, str) or type(got) is float
+
+
+@pytest.mark.parametrize(
+    "value", [float("nan"), float("inf"), -float("inf"), 0.0, -1.0, "Peak", "off", True, None, []]
+)
+def test_barrier_floor_rejects_anything_else_with_one_parameter_error(value):
+    with pytest.raises(ParameterError, match=r"^barrier_floor must be 'peak', 'none' or a finite"):
+        FlockingParams(barrier_floor=value)
 
 
 # ---------------------------------------------------------------- gamma and dynamic weights

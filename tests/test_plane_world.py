@@ -354,3 +354,111 @@ def test_flock_metrics_collects_every_metric():
     assert out["velocity_alignment"] == pytest.approx(1.0)
     assert out["n_components"] == 1 and out["largest_component_share"] == 1.0
     assert out["min_obstacle_distance_m"] == math.inf
+
+
+# ---------------------------------------------------------------- figures
+@pytest.fixture(scope="module")
+def seed000_short():
+    from cosim.plane.scenarios import run_plane_scenario
+
+    return run_plane_scenario("seed000", duration_s=0.5)
+
+
+def test_seed000_meta_records_the_obstacle_and_the_road_edges(seed000_short, tmp_path):
+    meta = json.loads((seed000_short.write(tmp_path) / "meta.json").read_text())
+    assert meta["obstacles"] == {
+        "circles": {"centres_m": [[55.0, 0.0]], "radii_m": [10.0]},
+        "walls": {"points_m": [[0.0, -25.0], [0.0, 25.0]], "normals": [[0.0, 1.0], [0.0, -1.0]]},
+    }
+
+
+def test_trajectory_figure_draws_the_obstacle_and_the_road_edges(seed000_short):
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Circle as CirclePatch
+
+    from cosim.plane.plots import trajectory_figure
+
+    fig = trajectory_figure(seed000_short)
+    try:
+        (ax,) = fig.axes
+        discs = [p for p in ax.patches if isinstance(p, CirclePatch)]
+        assert len(discs) == 1
+        assert discs[0].center == (55.0, 0.0) and discs[0].radius == 10.0
+        # The walls y = -25 m and y = 25 m: horizontal segments across the drawn area.
+        edges = [
+            ln for ln in ax.lines if len(ln.get_ydata()) == 2 and np.ptp(ln.get_ydata()) == 0.0
+        ]
+        assert sorted(float(ln.get_ydata()[0]) for ln in edges) == [-25.0, 25.0]
+        x_traj = seed000_short.trajectories["x_m"]
+        for ln in edges:
+            assert min(ln.get_xdata()) < x_traj.min() and max(ln.get_xdata()) > 65.0
+        labels = [t.get_text() for t in ax.get_legend().get_texts()]
+        assert {"obstacle", "road edge / wall", "agents", "virtual leader"} <= set(labels)
+        assert ax.get_xlabel() == "x (m)" and ax.get_ylabel() == "y (m)"
+        assert ax.get_title().startswith("seed000")
+    finally:
+        plt.close(fig)
+
+
+def test_trajectory_figure_without_obstacles_draws_none():
+    import matplotlib.pyplot as plt
+
+    from cosim.plane.plots import trajectory_figure
+
+    res = small_run()
+    res.meta["scenario"] = "tiny"
+    fig = trajectory_figure(res)
+    try:
+        (ax,) = fig.axes
+        assert len(ax.patches) == 0
+        assert all(len(ln.get_xdata()) != 2 for ln in ax.lines)  # only paths (6 points each)
+        assert ax.get_title().startswith("tiny")
+    finally:
+        plt.close(fig)
+
+
+def test_distance_figure_has_units_and_names_the_scenario(seed000_short):
+    import matplotlib.pyplot as plt
+
+    from cosim.plane.plots import distance_figure
+
+    fig = distance_figure(seed000_short)
+    try:
+        (ax,) = fig.axes
+        assert ax.get_xlabel() == "t (s)" and ax.get_ylabel() == "distance (m)"
+        assert ax.get_title().startswith("seed000")
+        assert len(ax.lines) == 2  # agents and obstacles
+    finally:
+        plt.close(fig)
+
+
+def test_plot_plane_result_writes_both_pngs(seed000_short, tmp_path):
+    from cosim.plane.plots import plot_plane_result
+
+    paths = plot_plane_result(seed000_short, tmp_path)
+    assert [p.name for p in paths] == ["trajectories.png", "min_distance.png"]
+    for p in paths:
+        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_trajectory_figure_draws_constant_road_edges():
+    import matplotlib.pyplot as plt
+
+    from cosim.plane.plots import trajectory_figure
+    from cosim.plane.scenarios import obstacles_meta
+
+    world = PlaneWorld(
+        [[0.0, 0.0], [30.0, 2.0]], np.zeros((2, 2)), ConstantLaw([1.0, 0.0]), 0.1,
+        road_edges=(-3.0, 5.0),
+    )
+    res = world.run(0.3)
+    res.meta["obstacles"] = obstacles_meta(world)
+    assert res.meta["obstacles"] == {"road_edges_m": [-3.0, 5.0]}
+    fig = trajectory_figure(res)
+    try:
+        (ax,) = fig.axes
+        edges = [ln for ln in ax.lines if len(ln.get_ydata()) == 2]
+        assert sorted(float(ln.get_ydata()[0]) for ln in edges) == [-3.0, 5.0]
+        assert all(np.ptp(ln.get_ydata()) == 0.0 for ln in edges)
+    finally:
+        plt.close(fig)

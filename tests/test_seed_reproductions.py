@@ -1,12 +1,18 @@
-"""Seed 000 and seed 001 reproductions in the plane world (cosim/plane_scenarios.py).
+"""Seed 000 and seed 001 reproductions in the plane world (cosim/plane/scenarios.py).
 
-Each scenario runs once per module (module-scoped fixtures): seed 000 takes about 2.5 s,
-each seed 001 variant about 2 s.
+Both use the paper's law exactly (``barrier_floor="none"``: no saturated barrier; seed 001 has
+no beta terms). Each scenario runs once per module (module-scoped fixtures): seed 000 takes
+about 1.2 s, each seed 001 variant about 2 s.
 
 Measured (numpy default_rng seeds 45 and 1):
 * seed 000, 15 s: min obstacle distance (walls and circle) 1.80 m (the initial state, nearest
-  wall), closest approach to the R = 10 m circle 7.49 m, max |y| 23.20 m, final leader velocity
-  mismatch 0.32 m^2/s^2 (100 at t = 0), one connected component at the end.
+  wall; the paper's edge repulsion at that gap moves the agent away, and no agent is within
+  the 2.39 m where the saturated barrier would act after t = 0.06 s); closest approach to the
+  R = 10 m circle 7.49 m at t = 1.29 s (some agent is within the 10.19 m where the saturated
+  barrier would act during 0.57 s); max |y| 23.20 m (the initial state); closest pair 3.17 m
+  (3.87 m at t = 0); final leader velocity mismatch 0.32 m^2/s^2 (100 at t = 0), one
+  connected component at the end. Nothing crosses the obstacle or the road edges. (With the
+  saturated barrier: closest approach 7.58 m, final mismatch 0.24 m^2/s^2.)
 * seed 001, 32 s, m = 2, unconstrained: leader velocity mismatch 6609.8 -> 3.87 m^2/s^2
   (0.059 %); m = 1: 3863.8 -> 1.43 (0.037 %); m = 3: 12771 -> 32.3 (0.25 %).
 * seed 001 with sat(p, 10 m/s): max speed 10.000 m/s after the first step (114.5 at t = 0);
@@ -69,6 +75,8 @@ def test_seed000_world_matches_constants_m():
     prm = seed000_params()
     assert (prm.d, prm.r, prm.d_beta, prm.d_wall) == pytest.approx((6.0, 7.2, 12.0, 3.0))
     assert prm.dynamic_weights
+    assert prm.barrier_floor == "none"  # the paper's law, no saturated barrier
+    assert world.controller.params == prm
     assert SCENARIOS["seed000"][1] == 15.0
 
 
@@ -86,6 +94,17 @@ def test_seed000_no_agent_beyond_the_road_edges(seed000):
     traj = seed000.trajectories
     assert len(traj) == 10 * 1501
     assert traj["y_m"].abs().max() < 25.0
+
+
+def test_seed000_agents_enter_the_gaps_a_saturated_barrier_would_floor(seed000):
+    # The two tests above hold under the paper's law where it differs from the saturated
+    # barrier: gaps below the repulsion peak (10.19 m of the circle's 12 m range, 2.39 m of
+    # the edges' 3 m range) occur, and the agents still keep off the obstacle and the edges.
+    traj = seed000.trajectories
+    circle_gap = np.hypot(traj["x_m"] - 55.0, traj["y_m"]) - 10.0
+    edge_gap = 25.0 - traj["y_m"].abs()
+    assert 7.0 < circle_gap.min() < 10.19
+    assert 1.5 < edge_gap.min() < 2.39
 
 
 def test_seed000_flock_passes_the_obstacle_and_follows_the_leader(seed000):

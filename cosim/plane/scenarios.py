@@ -20,7 +20,10 @@ from cosim.plane.world import PlaneResult, PlaneWorld
 
 
 def seed000_params() -> FlockingParams:
-    """Seed 000 CONSTANTS.m: d = 6, r = 1.2 d, d' = 12, d'' = 0.5 d, gains, dynamic weights."""
+    """Seed 000 CONSTANTS.m: d = 6, r = 1.2 d, d' = 12, d'' = 0.5 d, gains, dynamic weights.
+
+    The paper's law exactly (``barrier_floor="none"``): no saturated barrier.
+    """
     d = 6.0
     return FlockingParams(
         d=d,
@@ -43,6 +46,7 @@ def seed000_params() -> FlockingParams:
         c1_gamma=(5.0, 2.0),
         c2_gamma=(2 * math.sqrt(5.0), 2 * math.sqrt(2.0)),
         dynamic_weights=True,
+        barrier_floor="none",
     )
 
 
@@ -82,7 +86,8 @@ def seed001_params() -> FlockingParams:
     """Seed 001 Algorithm 2: c1 = c2 = 0.1 for the goal; unit alpha gains.
 
     Seed 001 does not state d and r (its text reads "c = X"); we take OS06's
-    d = 7, r = 1.2 d, epsilon = 0.1, a = b = 5, h = 0.2.
+    d = 7, r = 1.2 d, epsilon = 0.1, a = b = 5, h = 0.2. It has no obstacles, so
+    ``barrier_floor="none"`` (the paper's law) only states that no floor is used.
     """
     return FlockingParams(
         d=7.0,
@@ -95,6 +100,7 @@ def seed001_params() -> FlockingParams:
         c2_alpha=1.0,
         c1_gamma=0.1,
         c2_gamma=0.1,
+        barrier_floor="none",
     )
 
 
@@ -146,6 +152,29 @@ SCENARIOS = {
 }
 
 
+def obstacles_meta(world: PlaneWorld) -> dict:
+    """The world's obstacles as JSON-ready lists (for meta.json and the figures).
+
+    Keys (only those present): ``circles`` with ``centres_m`` (K, m) and ``radii_m`` (K,);
+    ``walls`` with ``points_m`` (K, m) and unit ``normals`` (K, m) into the free space;
+    ``road_edges_m`` the constant (right, left) lateral edges, m.
+    """
+    out: dict = {}
+    if world.circles is not None and len(world.circles.radii):
+        out["circles"] = {
+            "centres_m": world.circles.centres.tolist(),
+            "radii_m": world.circles.radii.tolist(),
+        }
+    if world.walls is not None and len(world.walls.points):
+        out["walls"] = {
+            "points_m": world.walls.points.tolist(),
+            "normals": world.walls.normals.tolist(),
+        }
+    if world.road_edges is not None and not callable(world.road_edges):
+        out["road_edges_m"] = np.asarray(world.road_edges, dtype=float).ravel()[:2].tolist()
+    return out
+
+
 def run_plane_scenario(
     name: str, seed: int | None = None, duration_s: float | None = None, **kwargs
 ) -> PlaneResult:
@@ -158,6 +187,7 @@ def run_plane_scenario(
     world = build(**kwargs)
     world.run(default_duration if duration_s is None else duration_s)
     meta = {"scenario": name, "duration_s": duration_s or default_duration, **kwargs}
+    meta["obstacles"] = obstacles_meta(world)
     law = getattr(world.controller, "law", world.controller)
     if hasattr(law, "params"):
         meta["params"] = law.params
