@@ -517,6 +517,8 @@ class CommunicatingController:
         axis = 0 if obs.period_s is None else 1
         if axis >= obs.m:
             return None
+        if obs.road is not None:  # a road profile is read at true positions: no shifting
+            return None
         if obs.walls is not None and len(obs.walls.points):
             if np.any(np.abs(obs.walls.normals[:, axis]) > 0):
                 return None
@@ -601,8 +603,25 @@ class _Views:
             leader_q=self._ego_value(obs.leader_q, ego),
             leader_p=self._ego_value(obs.leader_p, ego),
             period_s=obs.period_s,
+            desired_speed=self._by_id(obs, obs.desired_speed, self.ids[sl]),
+            road=obs.road,
+            others_ids=obs.others_ids,
             extras=obs.extras,
         )
+
+    @staticmethod
+    def _by_id(obs: Observation, values, ids) -> np.ndarray | None:
+        """A per-agent field of ``obs`` (N,) looked up for the view's rows by vehicle id."""
+        if values is None:
+            return None
+        index = {vid: k for k, vid in enumerate(obs.ids.tolist())}
+        vals = np.asarray(values, dtype=float)
+        out = np.empty(len(ids))
+        for r, vid in enumerate(ids.tolist()):
+            # a neighbour's row is ("comm_view", ego id, its own id); it may have left
+            own = vid[-1] if isinstance(vid, tuple) and vid[:1] == ("comm_view",) else vid
+            out[r] = vals[index[own]] if own in index else np.nan
+        return out
 
     def union(self, obs: Observation, axis: int, gap: float) -> Observation:
         """All blocks in one observation, block ``b`` shifted along ``axis``."""
@@ -668,6 +687,7 @@ class _Views:
             leader_q=leader_q,
             leader_p=leader_p,
             period_s=obs.period_s,
+            desired_speed=self._by_id(obs, obs.desired_speed, self.ids),
             extras=obs.extras,
             **others,
         )

@@ -17,6 +17,58 @@ from .observation import Observation
 from .params import ParameterError
 
 
+@dataclass(frozen=True)
+class ActuatorLimits:
+    """A road vehicle's actuator limits (road frame); the ``[limits]`` section of a scenario.
+
+    Attributes:
+        long_min_mps2, long_max_mps2: longitudinal acceleration range, m/s^2
+            (``long_min < 0 < long_max``).
+        lat_max_mps2: lateral acceleration bound (absolute), m/s^2.
+        lat_speed_max_mps: lateral speed bound, m/s.
+        jerk_max_mps3: jerk bound, m/s^3, or 0 for none.
+        emergency_decel_mps2: deceleration the safety layer may use, m/s^2
+            (at least ``-long_min_mps2``).
+    """
+
+    long_min_mps2: float = -4.5
+    long_max_mps2: float = 2.6
+    lat_max_mps2: float = 1.5
+    lat_speed_max_mps: float = 1.5
+    jerk_max_mps3: float = 0.0
+    emergency_decel_mps2: float = 9.0
+
+    def __post_init__(self) -> None:
+        for name in ("long_min_mps2", "long_max_mps2", "lat_max_mps2", "lat_speed_max_mps",
+                     "jerk_max_mps3", "emergency_decel_mps2"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, int | float) or not np.isfinite(v):
+                raise ParameterError(f"{name} must be a finite number, got {v!r}")
+        if not self.long_min_mps2 < 0:
+            raise ParameterError(f"long_min_mps2 must be < 0, got {self.long_min_mps2}")
+        for name in ("long_max_mps2", "lat_max_mps2", "lat_speed_max_mps"):
+            if not getattr(self, name) > 0:
+                raise ParameterError(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.jerk_max_mps3 < 0:
+            raise ParameterError(f"jerk_max_mps3 must be >= 0, got {self.jerk_max_mps3}")
+        if self.emergency_decel_mps2 < -self.long_min_mps2:
+            raise ParameterError(
+                f"emergency_decel_mps2 must be >= -long_min_mps2 = {-self.long_min_mps2}, "
+                f"got {self.emergency_decel_mps2}"
+            )
+
+    def box(self) -> AccelerationBox:
+        """The acceleration box layer of these limits."""
+        return AccelerationBox(self.long_min_mps2, self.long_max_mps2, self.lat_max_mps2)
+
+    def layers(self) -> list[Layer]:
+        """The constraint stack of these limits: the box, then the jerk limit if any."""
+        out: list[Layer] = [self.box()]
+        if self.jerk_max_mps3 > 0:
+            out.append(JerkLimit(self.jerk_max_mps3))
+        return out
+
+
 @dataclass
 class Layer:
     """Base class: ``apply(u, obs) -> u`` and clip statistics."""

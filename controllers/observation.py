@@ -59,6 +59,68 @@ class Circles:
 
 
 @dataclass(frozen=True)
+class RoadProfile:
+    """Lateral road edges along the road, piecewise constant (pure numpy).
+
+    ``s0`` (K,) m: start of each piece along the road (increasing, ``s0[0] <= 0``);
+    ``right``, ``left`` (K,) m: lateral positions of the right and left edge on that
+    piece (road frame, left positive); ``length_m``: road length, m; ``periodic``: ring.
+    """
+
+    s0: np.ndarray
+    right: np.ndarray
+    left: np.ndarray
+    length_m: float
+    periodic: bool = False
+
+    def __post_init__(self) -> None:
+        for name in ("s0", "right", "left"):
+            object.__setattr__(self, name, np.atleast_1d(np.asarray(getattr(self, name), float)))
+        if not (self.s0.shape == self.right.shape == self.left.shape) or len(self.s0) == 0:
+            raise ValueError("road profile: s0, right and left must have one equal length K > 0")
+        if np.any(np.diff(self.s0) < 0):
+            raise ValueError("road profile: s0 must be increasing")
+        if np.any(self.left <= self.right):
+            raise ValueError("road profile: left edge must lie left of the right edge")
+
+    @classmethod
+    def constant(cls, width_m: float, length_m: float, periodic: bool = False) -> RoadProfile:
+        """A road of constant width, centred on the centre line."""
+        return cls(np.zeros(1), np.array([-0.5 * width_m]), np.array([0.5 * width_m]),
+                   float(length_m), periodic)
+
+    @property
+    def is_constant(self) -> bool:
+        return len(self.s0) == 1
+
+    def edges(self, s: np.ndarray) -> np.ndarray:
+        """Edges (N, 2) m ``[right, left]`` at positions ``s`` (N,) m (clamped at the ends)."""
+        s = np.asarray(s, dtype=float)
+        if self.periodic:
+            s = np.mod(s, self.length_m)
+        k = np.clip(np.searchsorted(self.s0, s, side="right") - 1, 0, len(self.s0) - 1)
+        return np.column_stack([self.right[k], self.left[k]])
+
+    def narrowest(self, s: np.ndarray, ahead_m: np.ndarray | float) -> np.ndarray:
+        """Narrowest edges (N, 2) m over ``[s, s + ahead_m]``: max right, min left edge."""
+        s = np.asarray(s, dtype=float)
+        ahead = np.broadcast_to(np.asarray(ahead_m, dtype=float), s.shape)
+        out = self.edges(s)
+        if self.is_constant:
+            return out
+        end = s + ahead
+        for k in range(len(self.s0)):
+            start = self.s0[k]
+            stop = self.s0[k + 1] if k + 1 < len(self.s0) else np.inf
+            hits = (stop > s) & (start <= end)
+            if self.periodic:  # the piece one lap on, seen across the seam
+                hits |= (stop + self.length_m > s) & (start + self.length_m <= end)
+            out[hits, 0] = np.maximum(out[hits, 0], self.right[k])
+            out[hits, 1] = np.minimum(out[hits, 1], self.left[k])
+        return out
+
+
+@dataclass(frozen=True)
 class Observation:
     """One control step's view of the world.
 
@@ -78,6 +140,10 @@ class Observation:
             at each agent's longitudinal position, m (road frame only).
         leader_q, leader_p: gamma-agent position (m,) or per-agent (N, m), m and m/s.
         period_s: length of a periodic axis 0 (ring road), m, or None.
+        desired_speed: (N,) each agent's desired speed along the road, m/s (road only).
+        road: the road's edges along its length (:class:`RoadProfile`, road only).
+        others_ids: (M,) ids of the sensed vehicles (road only).
+        extras: law-specific inputs (e.g. seed 003's boundary points).
     """
 
     q: np.ndarray
@@ -97,6 +163,9 @@ class Observation:
     leader_q: np.ndarray | None = None
     leader_p: np.ndarray | None = None
     period_s: float | None = None
+    desired_speed: np.ndarray | None = None
+    road: RoadProfile | None = None
+    others_ids: np.ndarray | None = None
     extras: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -152,6 +221,9 @@ class Observation:
                 if v.shape not in ((q.shape[1],), q.shape):
                     raise ValueError(f"{name} must have shape ({q.shape[1]},) or {q.shape}")
                 object.__setattr__(self, name, v)
+        if self.desired_speed is not None:
+            v = np.broadcast_to(np.asarray(self.desired_speed, dtype=float), (n,))
+            object.__setattr__(self, "desired_speed", v)
         if self.period_s is not None and not self.period_s > 0:
             raise ValueError("period_s must be > 0")
 

@@ -146,3 +146,30 @@ def reference_reach_m(
     if decel_mps2 > 0:
         reach = max(reach, v_top_mps**2 / (2.0 * decel_mps2))
     return standstill_gap_m + reach + 10.0
+
+
+def road_vehicles(obs):
+    """CAVs then sensed vehicles of a road observation: s, d (m), v along the road (m/s),
+    length, width (m), each (N + M,)."""
+    if obs.others_q is None or len(obs.others_q) == 0:
+        return obs.q[:, 0], obs.q[:, 1], obs.p[:, 0], obs.length, obs.width
+    return (np.concatenate([obs.q[:, 0], obs.others_q[:, 0]]),
+            np.concatenate([obs.q[:, 1], obs.others_q[:, 1]]),
+            np.concatenate([obs.p[:, 0], obs.others_p[:, 0]]),
+            np.concatenate([obs.length, obs.others_length]),
+            np.concatenate([obs.width, obs.others_width]))
+
+
+def time_gap_reference(obs, time_gap_s: float, standstill_gap_m: float, decel_mps2: float,
+                       lateral_margin_m: float) -> np.ndarray:
+    """Reference speeds (N,) m/s of the CAVs of a road observation: their desired speeds
+    (``obs.desired_speed``) bounded by :func:`time_gap_speed` to their leaders among all
+    vehicles (CAVs and sensed ones)."""
+    desired = np.asarray(obs.desired_speed, dtype=float)
+    if time_gap_s <= 0 or obs.n == 0:
+        return desired.copy()
+    s_all, d_all, v_all, len_all, wid_all = road_vehicles(obs)
+    reach = reference_reach_m(float(desired.max()), time_gap_s, standstill_gap_m, decel_mps2)
+    gap, v_leader = leader_gaps(s_all, d_all, len_all, wid_all, np.arange(obs.n), reach_m=reach,
+                                period=obs.period_s, lateral_margin_m=lateral_margin_m, v=v_all)
+    return time_gap_speed(desired, gap, time_gap_s, standstill_gap_m, v_leader, decel_mps2)

@@ -37,11 +37,56 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .neighbours import cross_pairs
+from .params import ParameterError
+
+
+@dataclass(frozen=True)
+class SafetyParams:
+    """The safety layer's own parameters: the ``[safety]`` section of a scenario.
+
+    The step, the emergency deceleration and the lateral limits come from the run
+    (``[scenario]`` and ``[limits]``), never from here: see :meth:`SafetyConfig.for_run`.
+
+    Attributes:
+        enabled: apply the layer (default) or not (to study a raw law).
+        reaction_steps: command delay assumed in the safe-speed rule, steps.
+        min_gap_m: bumper-to-bumper standstill gap kept to the vehicle ahead, m.
+        lateral_clearance_m: side-to-side clearance kept to vehicles beside, m.
+        edge_margin_m: distance kept between the vehicle's side and the road edge, m.
+        assumed_leader_decel_mps2: deceleration assumed for the vehicle ahead, m/s^2.
+        cut_in_time_s: closing-speed buffer of the side rule: a vehicle closing in at
+            ``dv`` counts as beside within ``dv * cut_in_time_s + min_gap_m``, s.
+    """
+
+    enabled: bool = True
+    reaction_steps: int = 1
+    min_gap_m: float = 2.0
+    lateral_clearance_m: float = 0.3
+    edge_margin_m: float = 0.1
+    assumed_leader_decel_mps2: float = 9.0
+    cut_in_time_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        if isinstance(self.reaction_steps, bool) or not isinstance(self.reaction_steps, int) \
+                or self.reaction_steps < 0:
+            raise ParameterError(f"reaction_steps must be an integer >= 0, got "
+                                 f"{self.reaction_steps!r}")
+        for name in ("min_gap_m", "lateral_clearance_m", "edge_margin_m", "cut_in_time_s"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v >= 0):
+                raise ParameterError(f"{name} must be finite and >= 0, got {v!r}")
+        v = self.assumed_leader_decel_mps2
+        if not (np.isfinite(v) and v > 0):
+            raise ParameterError(f"assumed_leader_decel_mps2 must be finite and > 0, got {v!r}")
 
 
 @dataclass
 class SafetyConfig:
-    """Parameters (SI). See module docstring for the rules."""
+    """Everything the layer uses (SI); see the module docstring for the rules.
+
+    Built for a run by :meth:`for_run` from :class:`SafetyParams`, the step and the
+    actuator limits; the defaults serve unit tests.
+    """
 
     dt: float = 0.1
     reaction_steps: int = 1
@@ -57,6 +102,23 @@ class SafetyConfig:
     @property
     def tau(self) -> float:
         return self.reaction_steps * self.dt
+
+    @classmethod
+    def for_run(cls, params: SafetyParams, dt: float, limits) -> SafetyConfig:
+        """The layer's configuration for a run with step ``dt`` (s) and ``limits``
+        (:class:`~controllers.constraints.ActuatorLimits`)."""
+        return cls(
+            dt=dt,
+            reaction_steps=params.reaction_steps,
+            min_gap_m=params.min_gap_m,
+            lateral_clearance_m=params.lateral_clearance_m,
+            edge_margin_m=params.edge_margin_m,
+            own_decel_mps2=limits.emergency_decel_mps2,
+            leader_decel_mps2=params.assumed_leader_decel_mps2,
+            lat_accel_mps2=limits.lat_max_mps2,
+            lat_speed_max_mps=limits.lat_speed_max_mps,
+            cut_in_time_s=params.cut_in_time_s,
+        )
 
 
 def krauss_safe_speed(gap_m: np.ndarray, v_leader_mps: np.ndarray, c: SafetyConfig) -> np.ndarray:

@@ -133,7 +133,7 @@ def compare(out_dir: Path | str) -> dict[str, pd.DataFrame]:
     out = Path(out_dir)
     meta = json.loads((out / "meta.json").read_text())
     ours = pd.read_csv(out / "intervals.csv")
-    e1, edges = read_run_detectors(meta)
+    e1, edges = read_run_detectors(meta, out)
     sec = e1_sections(e1)
     xs = meta["measurement"]["cross_sections_m"]
     loop_s = {int(k): s for k, s in sec_positions(e1).items()}

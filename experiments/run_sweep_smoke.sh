@@ -18,7 +18,7 @@ for file in experiments/sweeps/*.toml; do
     out="$OUT/${name}_smoke"
     rm -rf "$out"
     start=$(date +%s.%N)
-    "$PY" -c 'import sys; from cosim.sweep import main; sys.exit(main(sys.argv[1:]))' \
+    "$PY" -c 'import sys; from cosim.sweeps import main; sys.exit(main(sys.argv[1:]))' \
         "$file" --smoke --out "$out" --quiet "$@"
     rc=$?
     end=$(date +%s.%N)

@@ -8,13 +8,14 @@ import json
 import math
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 from scipy import stats
 
-from cosim.analysis import analysis as an
+import cosim.analysis as an
 from cosim.analysis import figures as fg
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -246,7 +247,7 @@ def test_run_figures_on_a_ring(tmp_path):
     assert [p.name for p in paths] == ["time_space.png", "top_view.png"]
     assert all(p.read_bytes()[:8] == PNG for p in paths)
     assert fg.series_label(["demand.cav_share", "controller.kind", "network.width_m"],
-                           [0.25, "flocking", 8.0]) == "CAV 25% flocking width_m=8"
+                           [0.25, "flocking", 8.0]) == "CAV 25 %, flocking, width 8 m"
 
 
 def test_animated_top_view_has_one_frame_per_interval_and_vehicles_move(tmp_path):
@@ -277,3 +278,299 @@ def test_animate_refuses_a_backwards_time_range(tmp_path):
     assert proc.returncode == 2
     assert "--t-range must be increasing" in proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+
+# --------------------------------------------------------------------------------------
+# The smoke report describes the grid that ran
+# --------------------------------------------------------------------------------------
+
+
+def test_a_smoke_report_describes_the_smoke_grid_not_the_full_one(tmp_path):
+    import tomllib
+
+    from cosim.sweeps.plan import sweep_from_dict
+
+    text = """
+seeds = [1, 2, 3]
+[sweep]
+name = "big"
+description = "FULL GRID: demand 1000-9000 veh/h x 3 shares, 3 seeds"
+[overrides]
+scenario.duration_s = 600.0
+[axes]
+"demand.inflow_vph" = [1000.0, 5000.0, 9000.0]
+"demand.cav_share" = [0.0, 0.5, 1.0]
+[smoke]
+seeds = [7]
+[smoke.overrides]
+scenario.duration_s = 40.0
+scenario.warmup_s = 10.0
+scenario.interval_s = 15.0
+[smoke.axes]
+"demand.inflow_vph" = [4000.0]
+"""
+    plan = sweep_from_dict(tomllib.loads(text), smoke=True)
+    (tmp_path / "sweep.json").write_text(json.dumps(plan.to_json(), default=str))
+    rows = [{"run_id": p.run_id, "status": "ok", "error": "", "demand.inflow_vph": 4000.0,
+             "demand.cav_share": p.scenario.demand.cav_share, "controller.kind": "flocking",
+             "seed": 7, "edie_flow_vph": 3000.0, "edie_density_vpkm": 40.0,
+             "space_mean_speed_mps": 20.8} for p in plan.points]
+    pd.DataFrame(rows).to_csv(tmp_path / "results.csv", index=False)
+    an.analyse(tmp_path, figures=False)
+    report = (tmp_path / "analysis" / "report.md").read_text()
+    grid = report.split("## Grid that ran", 1)[1].split("\n## ", 1)[0]
+    assert report.startswith("# Sweep analysis: big_smoke")
+    assert "Smoke test** of the sweep 'big'" in report
+    assert "FULL GRID" not in report
+    assert "- demand.inflow_vph: 4000 (1 value)" in grid
+    assert "- demand.cav_share: 0, 0.5, 1 (3 values)" in grid
+    assert "- seeds: 7\n" in grid
+    assert "- grid points: 1 x 3 x 1 = 3" in grid
+    assert "scenario.duration_s = 40" in grid and "600" not in grid
+    for full_only in ("1000", "9000", "seeds: 1, 2, 3"):
+        assert full_only not in grid
+
+
+def test_a_full_sweep_report_keeps_its_description_and_grid(sweep_dir):
+    an.analyse(sweep_dir, figures=False)
+    report = (sweep_dir / "analysis" / "report.md").read_text()
+    assert "Smoke test" not in report
+    assert "- demand.inflow_vph: 1000, 2000, 3000 (3 values)" in report
+    assert "- seeds: 1, 2, 3" in report
+
+
+# --------------------------------------------------------------------------------------
+# Figure style: checked on the matplotlib objects
+# --------------------------------------------------------------------------------------
+
+UNIT = r", (veh/km|veh/h|m/s|s|m|%)( |\)|$)"
+
+
+def _axes_with_units(fig):
+    import re
+
+    for ax in fig.axes:
+        if ax.get_label() == "<colorbar>":
+            assert re.search(UNIT, ax.get_ylabel() or ax.get_xlabel()), ax.get_ylabel()
+            continue
+        if not ax.get_visible():
+            continue
+        for label in (ax.get_xlabel(), ax.get_ylabel()):
+            if label:
+                assert re.search(UNIT, label), label
+    # every panel's y axis is labelled, and the bottom panel's x axis
+    assert all(ax.get_ylabel() for ax in fig.axes)
+    assert [ax for ax in fig.axes if ax.get_label() != "<colorbar>" and ax.get_xlabel()]
+
+
+def _series_lines(ax):
+    return [ln for ln in ax.get_lines() if not ln.get_label().startswith("_")]
+
+
+def _fd(rows: list[dict], intervals: pd.DataFrame | None = None, series=None, title="s"):
+    runs = pd.DataFrame(rows)
+    series = series or ["demand.cav_share", "controller.kind"]
+    return fg.fundamental_diagram_figure(runs, series, "demand.inflow_vph", intervals, title)
+
+
+def _fd_rows(shares, speeds=(25.0, 24.0, 23.0), extra=None):
+    rows = []
+    for share in shares:
+        for demand, v in zip((1000.0, 2000.0, 3000.0), speeds, strict=True):
+            q = 0.9 * demand
+            rows.append({"demand.cav_share": share, "controller.kind": "flocking",
+                         "demand.inflow_vph": demand, "edie_flow_vph": q,
+                         "edie_density_vpkm": q / (3.6 * v), "space_mean_speed_mps": v,
+                         **(extra or {})})
+    return rows
+
+
+def test_fd_series_have_distinct_colours_markers_and_readable_labels(sweep_dir):
+    """The capacity_hdv5 case: 95 % and 100 % CAVs must not share colour or marker."""
+    import matplotlib.colors as mcolors
+    import matplotlib.pyplot as plt
+
+    fig = _fd(_fd_rows([1.0, 0.95]), title="capacity_hdv5")
+    ax_q, ax_v = fig.axes
+    lines = _series_lines(ax_q)
+    assert [ln.get_label() for ln in lines] == ["CAV 95 %, flocking", "CAV 100 %, flocking"]
+    colours = {mcolors.to_hex(ln.get_color()) for ln in lines}
+    markers = {ln.get_marker() for ln in lines}
+    assert len(colours) == 2 and len(markers) == 2
+    assert colours <= {c.lower() for c in fg.PALETTE}  # the colour-blind-safe palette
+    assert "capacity_hdv5" in fig._suptitle.get_text()
+    _axes_with_units(fig)
+    plt.close(fig)
+
+
+def test_fd_baseline_variants_get_three_colours_and_variant_labels():
+    """The baselines case: three variants, no CAVs: three colours, labels by variant."""
+    import matplotlib.colors as mcolors
+    import matplotlib.pyplot as plt
+
+    rows = []
+    for variant in ("lanefree_sl2015", "lanefree_sl2015_sumo", "three_lane_lc2013"):
+        rows += _fd_rows([0.0], extra={"variant": variant})
+    for r in rows:
+        r["controller.kind"] = "sumo"
+    fig = _fd(rows, series=["variant", "demand.cav_share", "controller.kind"], title="baselines")
+    labels = [ln.get_label() for ln in _series_lines(fig.axes[0])]
+    assert labels == ["lanefree sl2015, HDV only", "lanefree sl2015 sumo, HDV only",
+                      "three lane lc2013, HDV only"]
+    assert len({mcolors.to_hex(ln.get_color()) for ln in _series_lines(fig.axes[0])}) == 3
+    assert len({ln.get_marker() for ln in _series_lines(fig.axes[0])}) == 3
+    plt.close(fig)
+
+
+def test_series_labels_stay_distinct_when_the_short_form_is_ambiguous():
+    keys = ["demand.cav_share", "controller.kind"]
+    assert fg.series_labels(keys, [[0.0, "flocking"], [0.5, "flocking"]]) == [
+        "HDV only", "CAV 50 %, flocking"]
+    # two controllers at 0 % CAVs: the short form would read "HDV only" twice
+    assert fg.series_labels(keys, [[0.0, "flocking"], [0.0, "sumo"]]) == [
+        "CAV 0 %, flocking", "CAV 0 %, SUMO-driven"]
+    styles = [fg.series_style(k) for k in range(20)]
+    assert len({(s["color"], s["marker"], s["linestyle"]) for s in styles}) == 20
+    assert len({s["color"] for s in styles[:8]}) == 8
+    assert len({s["marker"] for s in styles[:8]}) == 8
+
+
+def test_fd_legend_shows_grey_per_interval_dots(sweep_dir):
+    import matplotlib.colors as mcolors
+    import matplotlib.pyplot as plt
+
+    res = an.load_results(sweep_dir)
+    fig = fg.fundamental_diagram_figure(an.fd_runs(res), res.series_cols, res.demand_col,
+                                        an.fd_intervals(res), "synthetic")
+    ax_q = fig.axes[0]
+    legend = ax_q.get_legend()
+    texts = [t.get_text() for t in legend.get_texts()]
+    assert texts[:2] == ["HDV only", "CAV 100 %, flocking"]
+    assert "per interval" in texts and any(t.startswith("per run") for t in texts)
+    handle = legend.legend_handles[texts.index("per interval")]
+    r, g, b, _ = mcolors.to_rgba(handle.get_color())
+    assert r == g == b and 0.3 < r < 0.8  # grey
+    # the interval dots themselves are that grey, and there are all 36 of them
+    grey = [c for c in ax_q.collections
+            if len(c.get_offsets()) == 36 and np.allclose(c.get_facecolor()[0][:3], r)]
+    assert len(grey) == 1
+    assert "synthetic" in fig._suptitle.get_text()
+    _axes_with_units(fig)
+    plt.close(fig)
+
+
+def test_fd_says_when_it_holds_only_the_free_flow_branch():
+    import matplotlib.pyplot as plt
+
+    def note(fig):
+        return [t.get_text() for t in fig.axes[0].texts if "free-flow" in t.get_text()]
+
+    free = _fd(_fd_rows([1.0], speeds=(25.0, 24.5, 22.0)))  # all >= 80 % of 25 m/s
+    assert len(note(free)) == 1
+    assert note(free)[0].startswith("free-flow branch only: no congested point")
+    assert "25.0 m/s" in note(free)[0]
+    congested = _fd(_fd_rows([1.0], speeds=(25.0, 24.0, 12.0)))  # 12 < 0.8 x 25
+    assert note(congested) == []
+    # a congested interval is a congested point too
+    iv = pd.DataFrame({"edie_density_vpkm": [80.0], "edie_flow_vph": [2000.0],
+                       "space_mean_speed_mps": [6.9]})
+    assert note(_fd(_fd_rows([1.0], speeds=(25.0, 24.5, 22.0)), intervals=iv)) == []
+    plt.close("all")
+
+
+def test_capacity_figure_style(sweep_dir):
+    import matplotlib.pyplot as plt
+
+    cap = an.capacity_table(an.load_results(sweep_dir))
+    two = pd.concat([cap, cap.assign(**{"controller.kind": "sumo"})], ignore_index=True)
+    fig = fg.capacity_figure(two, ["demand.cav_share", "controller.kind"], "synthetic")
+    ax = fig.axes[0]
+    texts = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert texts == ["flocking", "SUMO-driven"]
+    lines = [c.lines[0] for c in ax.containers]  # errorbar: (data line, caps, bars)
+    assert [c.get_label() for c in ax.containers] == ["flocking", "SUMO-driven"]
+    assert len({ln.get_color() for ln in lines}) == 2
+    assert len({ln.get_marker() for ln in lines}) == 2
+    assert ax.get_xlabel() == "CAV share, %" and "veh/h" in ax.get_ylabel()
+    assert "synthetic" in ax.get_title()
+    plt.close(fig)
+
+
+def test_time_space_diagram_tells_cavs_from_hdvs(tmp_path):
+    import matplotlib.pyplot as plt
+
+    run = tmp_path / "run"
+    run.mkdir()
+    _trajectory_run(run)
+    tr = pd.read_csv(run / "trajectories.csv")
+    fig = fg.time_space_figure(tr, title="Time-space diagram: demo")
+    panels = [ax for ax in fig.axes if ax.get_label() != "<colorbar>"]
+    assert [ax.get_title(loc="left") for ax in panels] == ["CAVs (6 vehicles)",
+                                                            "HDVs (6 vehicles)"]
+    segs = [ax.collections[0] for ax in panels]
+    n_cav = 6 * 49  # 6 vehicles x 49 steps each
+    assert [len(c.get_segments()) for c in segs] == [n_cav, n_cav]
+    assert segs[0].get_cmap().name == segs[1].get_cmap().name == fg.SPEED_CMAP
+    assert segs[0].get_clim() == segs[1].get_clim()
+    assert panels[-1].get_xlabel() == "time, s"
+    assert [c for c in fig.axes if c.get_label() == "<colorbar>"][0].get_ylabel() == \
+        "speed, m/s"
+    assert "demo" in fig._suptitle.get_text()
+    _axes_with_units(fig)
+    # a run without HDVs says so in its HDV panel
+    only_cav = fg.time_space_figure(tr[tr["is_cav"]])
+    hdv_panel = [ax for ax in only_cav.axes if ax.get_label() != "<colorbar>"][1]
+    assert [t.get_text() for t in hdv_panel.texts] == ["no HDVs in this run"]
+    plt.close("all")
+
+
+def test_run_figures_are_titled_by_scenario_and_top_views_have_units(tmp_path):
+    import matplotlib.pyplot as plt
+
+    run = tmp_path / "run"
+    run.mkdir()
+    _trajectory_run(run)
+    fig = fg.top_view_figure(run / "trajectories.csv", times=[1.0, 5.0], title="Top view: x")
+    _axes_with_units(fig)
+    legend = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert legend == ["CAV", "HDV"]
+    plt.close(fig)
+    (run / "config.toml").write_text('[scenario]\nname = "ring_demo"\n[network]\nkind = "ring"\n'
+                                     'circumference_m = 600.0\n')
+    seen = {}
+    real = fg._save
+
+    def spy(fig, out_path):
+        seen[Path(out_path).name] = fig._suptitle.get_text()
+        return real(fig, out_path)
+
+    import unittest.mock
+
+    with unittest.mock.patch.object(fg, "_save", spy):
+        fg.plot_run(run, tmp_path / "figs")
+    assert seen == {"time_space.png": "Time-space diagram: ring_demo (run run)",
+                    "top_view.png": "Top view: ring_demo (run run)"}
+
+
+def test_gif_frames_keep_their_x_axis_label_inside_the_picture(tmp_path):
+    import matplotlib.pyplot as plt
+
+    run = tmp_path / "run"
+    run.mkdir()
+    _trajectory_run(run)
+    fig, anim = fg.top_view_animation(run / "trajectories.csv", t_range=(2.0, 4.0),
+                                      title="Top view: demo")
+    fig.set_dpi(fg.ANIMATION_DPI)
+    anim._init_draw()
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == "position s, m (lateral axis stretched)"
+    box = ax.xaxis.label.get_window_extent(renderer)
+    width, height = fig.canvas.get_width_height()
+    assert box.y0 >= 0 and box.x0 >= 0 and box.x1 <= width and box.y1 <= height
+    assert ax.yaxis.label.get_window_extent(renderer).x0 >= 0
+    assert ax.get_title() == "Top view: demo"
+    _axes_with_units(fig)
+    plt.close(fig)

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-from cosim.cli.main import builtin_scenarios
+from cosim.config.builtins import builtin_scenarios
 from cosim.config.scenario import Scenario, load_scenario, scenario_from_dict
 from cosim.config.toml_write import dumps_toml
 from cosim.errors import ConfigError, CosimError
@@ -85,7 +85,7 @@ def _file_scenario(tmp_path: Path, net_name: str, net_text: str | None) -> Path:
         (tmp_path / net_name).write_text(net_text)
     toml = tmp_path / "scenario.toml"
     toml.write_text(
-        "[scenario]\nduration_s = 5.0\nwarmup_s = 1.0\n"
+        "[scenario]\nduration_s = 5.0\nwarmup_s = 1.0\ninterval_s = 4.0\n"
         f'[network]\nkind = "file"\nnet_file = "{net_name}"\nroute_edges = ["main"]\n'
     )
     return toml
@@ -263,7 +263,7 @@ def test_meta_records_seed_and_versions(runs):
     assert {"cosim", "sumo", "numpy", "pandas", "python"} <= set(v)
     assert v["sumo"] == importlib.metadata.version("eclipse-sumo")
     assert re.fullmatch(r"\d+\.\d+\.\d+.*", v["sumo"])
-    assert meta["routes"]["n_cav"] + meta["routes"]["n_hdv"] > 0
+    assert meta["demand"]["vehicles"] > 0 and meta["demand"]["n_cav"] > 0
 
 
 @pytest.mark.sumo

@@ -70,8 +70,8 @@ def run_python(code: str, timeout: float = 60.0) -> dict:
 
 
 def test_cav_share_and_counts(straight: RoadNetwork, tmp_path: Path) -> None:
-    demand = DemandSpec(inflow_vph=3600.0, cav_share=0.3, duration_s=600.0)
-    info = write_routes(straight, demand, seed=7, path=tmp_path / "r.rou.xml")
+    demand = DemandSpec(inflow_vph=3600.0, cav_share=0.3)
+    info = write_routes(straight, demand, seed=7, path=tmp_path / "r.rou.xml", horizon_s=600.0)
     vehicles = _vehicles(info.path)
     n = len(vehicles)
     n_cav = sum(v.get("type").startswith("cav") for v in vehicles)
@@ -83,10 +83,10 @@ def test_cav_share_and_counts(straight: RoadNetwork, tmp_path: Path) -> None:
 
 
 def test_same_seed_same_file_other_seed_differs(straight: RoadNetwork, tmp_path: Path) -> None:
-    demand = DemandSpec(inflow_vph=2000.0, duration_s=120.0)
-    a = write_routes(straight, demand, seed=1, path=tmp_path / "a.rou.xml")
-    b = write_routes(straight, demand, seed=1, path=tmp_path / "b.rou.xml")
-    c = write_routes(straight, demand, seed=2, path=tmp_path / "c.rou.xml")
+    demand = DemandSpec(inflow_vph=2000.0)
+    a = write_routes(straight, demand, seed=1, path=tmp_path / "a.rou.xml", horizon_s=120.0)
+    b = write_routes(straight, demand, seed=1, path=tmp_path / "b.rou.xml", horizon_s=120.0)
+    c = write_routes(straight, demand, seed=2, path=tmp_path / "c.rou.xml", horizon_s=120.0)
     text_a = a.path.read_text()
     assert text_a == b.path.read_text()
     assert text_a != c.path.read_text()
@@ -95,8 +95,8 @@ def test_same_seed_same_file_other_seed_differs(straight: RoadNetwork, tmp_path:
 
 def test_desired_speed_distribution(straight: RoadNetwork, tmp_path: Path) -> None:
     low, high = 22.0, 30.0
-    demand = DemandSpec(inflow_vph=3600.0, duration_s=1000.0, desired_speed_mps=(low, high))
-    info = write_routes(straight, demand, seed=3, path=tmp_path / "r.rou.xml")
+    demand = DemandSpec(inflow_vph=3600.0, desired_speed_mps=(low, high))
+    info = write_routes(straight, demand, seed=3, path=tmp_path / "r.rou.xml", horizon_s=1000.0)
     vehicles = _vehicles(info.path)
     v0 = np.array([float(v.get("speedFactor")) * straight.speed_limit_mps for v in vehicles])
     param = np.array([float(v.find("param").get("value")) for v in vehicles])
@@ -123,8 +123,8 @@ def test_arrival_processes(process: str) -> None:
 
 
 def test_lateral_departures_stay_on_the_road(straight: RoadNetwork, tmp_path: Path) -> None:
-    demand = DemandSpec(inflow_vph=3600.0, duration_s=300.0)
-    info = write_routes(straight, demand, seed=5, path=tmp_path / "r.rou.xml")
+    demand = DemandSpec(inflow_vph=3600.0)
+    info = write_routes(straight, demand, seed=5, path=tmp_path / "r.rou.xml", horizon_s=300.0)
     types = _vtypes(info.path)
     lat = np.array([float(v.get("departPosLat")) for v in _vehicles(info.path)])
     width = np.array([float(types[v.get("type")].get("width")) for v in _vehicles(info.path)])
@@ -142,8 +142,8 @@ def test_onramp_demand_has_ramp_vehicles(cache: Path, tmp_path: Path) -> None:
         NetworkSpec(kind="onramp", length_m=400.0, merge_position_m=150.0, ramp_length_m=100.0),
         cache,
     )
-    demand = DemandSpec(inflow_vph=1800.0, ramp_inflow_vph=600.0, duration_s=600.0)
-    info = write_routes(net, demand, seed=1, path=tmp_path / "r.rou.xml")
+    demand = DemandSpec(inflow_vph=1800.0, ramp_inflow_vph=600.0)
+    info = write_routes(net, demand, seed=1, path=tmp_path / "r.rou.xml", horizon_s=600.0)
     vehicles = _vehicles(info.path)
     ramp = [v for v in vehicles if v.get("route") == "ramp"]
     assert len(ramp) == info.n_ramp and 60 < info.n_ramp < 140
@@ -154,7 +154,7 @@ def test_onramp_demand_has_ramp_vehicles(cache: Path, tmp_path: Path) -> None:
 
 def test_three_lane_demand_uses_lanes(cache: Path, tmp_path: Path) -> None:
     net = build_network(NetworkSpec(kind="three_lane", length_m=200.0), cache)
-    info = write_routes(net, DemandSpec(duration_s=300.0), seed=1, path=tmp_path / "r.rou.xml")
+    info = write_routes(net, DemandSpec(), seed=1, path=tmp_path / "r.rou.xml", horizon_s=300.0)
     vehicles = _vehicles(info.path)
     assert {v.get("departLane") for v in vehicles} == {"0", "1", "2"}
     assert all(v.get("departPosLat") is None for v in vehicles)
@@ -170,8 +170,8 @@ def test_three_lane_demand_uses_lanes(cache: Path, tmp_path: Path) -> None:
 def test_ring_density_is_exact_and_vehicles_do_not_overlap(
     ring: RoadNetwork, tmp_path: Path, placement: str
 ) -> None:
-    demand = DemandSpec(ring_density_vpkm=80.0, ring_placement=placement, duration_s=60.0)
-    info = write_routes(ring, demand, seed=4, path=tmp_path / "ring.rou.xml")
+    demand = DemandSpec(ring_density_vpkm=80.0, ring_placement=placement)
+    info = write_routes(ring, demand, seed=4, path=tmp_path / "ring.rou.xml", horizon_s=60.0)
     n = round(80.0 * ring.length_m / 1000.0)
     assert info.n_ring == n == len(info.ring_vehicle_ids)
     assert info.ring_density_vpkm == pytest.approx(1000.0 * n / ring.length_m)
@@ -210,8 +210,8 @@ def test_ring_density_too_high_is_a_config_error(ring: RoadNetwork, tmp_path: Pa
 
 @pytest.mark.sumo
 def test_sumo_inserts_the_whole_ring_at_t0_and_keeps_it(ring: RoadNetwork, tmp_path: Path) -> None:
-    demand = DemandSpec(ring_density_vpkm=40.0, duration_s=60.0)
-    info = write_routes(ring, demand, seed=9, path=tmp_path / "ring.rou.xml")
+    demand = DemandSpec(ring_density_vpkm=40.0)
+    info = write_routes(ring, demand, seed=9, path=tmp_path / "ring.rou.xml", horizon_s=60.0)
     out = run_python(f"""
         import json
         import xml.etree.ElementTree as ET
@@ -253,8 +253,8 @@ def test_sumo_inserts_the_whole_ring_at_t0_and_keeps_it(ring: RoadNetwork, tmp_p
 
 @pytest.mark.sumo
 def test_sumo_writes_detector_outputs(straight: RoadNetwork, tmp_path: Path) -> None:
-    demand = DemandSpec(inflow_vph=2400.0, duration_s=60.0)
-    routes = write_routes(straight, demand, seed=2, path=tmp_path / "r.rou.xml")
+    demand = DemandSpec(inflow_vph=2400.0)
+    routes = write_routes(straight, demand, seed=2, path=tmp_path / "r.rou.xml", horizon_s=60.0)
     out_dir = tmp_path / "out"
     det = write_detectors(straight, [50.0, 150.0], tmp_path / "det.add.xml", 30.0, out_dir)
     assert det.loop_s_m == pytest.approx((50.0, 150.0))
@@ -313,7 +313,6 @@ def test_sumo_writes_detector_outputs(straight: RoadNetwork, tmp_path: Path) -> 
         ({"ring_density_vpkm": -3.0}, "ring_density_vpkm"),
         ({"desired_speed_mps": (30.0, 20.0)}, "desired_speed_mps"),
         ({"desired_speed_mps": (0.0, 20.0)}, "desired_speed_mps"),
-        ({"duration_s": 0.0}, "duration_s"),
         ({"depart_lateral": "left"}, "depart_lateral"),
         ({"depart_speed": "fast"}, "depart_speed"),
         ({"arrivals": "bursty"}, "arrivals"),
@@ -348,9 +347,9 @@ def test_slot_insertion_keeps_headway_and_never_departs_faster_than_the_slot_lea
     from cosim.road.spec import NetworkSpec
 
     net = build_network(NetworkSpec(kind="straight", length_m=300.0), cache_dir=tmp_path)
-    demand = DemandSpec(inflow_vph=16000.0, duration_s=120.0, cav_share=0.5,
+    demand = DemandSpec(inflow_vph=16000.0, cav_share=0.5,
                         slot_headway_s=0.6)
-    info = write_routes(net, demand, 7, tmp_path / "r.rou.xml")
+    info = write_routes(net, demand, 7, tmp_path / "r.rou.xml", horizon_s=120.0)
     root = ET.parse(info.path).getroot()
     lengths = {v.get("id"): float(v.get("length")) for v in root.iter("vType")}
     by_slot: dict = {}

@@ -10,7 +10,7 @@ import pytest
 
 CODE = r"""
 import json, sys, dataclasses
-from cosim.cli.main import builtin_scenarios
+from cosim.config.builtins import builtin_scenarios
 from cosim.config.scenario import load_scenario
 from cosim.sim.runner import run_scenario
 sc = load_scenario(builtin_scenarios()[sys.argv[1]])

@@ -9,14 +9,19 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
+import subprocess
+import sys
+import time
 import tomllib
+from collections import Counter
 from pathlib import Path
 
 import pandas as pd
 import pytest
 
+import cosim.sweeps as sw
 from cosim.errors import ConfigError
-from cosim.sweeps import sweep as sw
 
 TINY = """
 seeds = [1]
@@ -71,7 +76,7 @@ controller.params.c1_alpha = [0.2, 0.4]
     assert len(plan.points) == 2 * 3 * 2 * 2
     assert len({p.run_id for p in plan.points}) == len(plan.points)
     combos = {(p.scenario.demand.inflow_vph, p.scenario.demand.cav_share,
-               p.scenario.controller.flocking_params().c1_alpha, p.seed) for p in plan.points}
+               p.scenario.controller.law_params().c1_alpha, p.seed) for p in plan.points}
     assert len(combos) == 24
     assert all(p.scenario.network.length_m == 500.0 for p in plan.points)
     # integer axis values become the field's type (float) through scenario_from_dict
@@ -112,6 +117,7 @@ seeds = [7]
 [smoke.overrides]
 scenario.duration_s = 30.0
 scenario.warmup_s = 10.0
+scenario.interval_s = 10.0
 [smoke.axes]
 "demand.inflow_vph" = [3000.0]
 """, smoke=True)
@@ -144,7 +150,7 @@ network.kind = "three_lane"
 @pytest.mark.parametrize("text, message", [
     ('[axes]\n"demand.inflow" = [1.0]\n', "unknown parameter 'demand.inflow'"),
     ('[axes]\n"demnd.cav_share" = [1.0]\n', "no section \\[demnd\\]"),
-    ('[axes]\n"controller.params.c9" = [1.0]\n', "unknown parameter 'controller.params.c9'"),
+    ('[axes]\n"controller.params.c9" = [1.0]\n', "controller.params: unknown key 'c9'"),
     ('[axes]\n"demand.cav_share" = [0.5, 1.5]\n', "grid point 2/2 .*cav_share"),
     ('[axes]\n"demand.cav_share" = []\n', "non-empty list"),
     ('[axes]\n"demand.cav_share" = [0.5, 0.5]\n', "duplicate values"),
@@ -170,7 +176,9 @@ def test_a_typo_fails_with_one_line_before_any_run(tmp_path, capsys):
 
 
 def test_base_scenario_by_name_and_by_relative_path(tmp_path):
-    (tmp_path / "my.toml").write_text('[scenario]\nduration_s = 33.0\nwarmup_s = 3.0\n')
+    (tmp_path / "my.toml").write_text(
+        '[scenario]\nduration_s = 33.0\nwarmup_s = 3.0\ninterval_s = 10.0\n'
+    )
     by_path = sw.load_sweep(_write(tmp_path, '[sweep]\nbase = "my.toml"\n'))
     assert by_path.points[0].scenario.scenario.duration_s == 33.0
     by_name = sw.load_sweep(_write(tmp_path, '[sweep]\nbase = "ring"\n', "r.toml"))
@@ -208,7 +216,7 @@ def test_shipped_sweeps_validate(name, n_full, n_smoke):
     if name == "baselines":
         assert {p.scenario.network.kind for p in full.points} == {"straight", "three_lane"}
     if name == "ring_gamma":
-        gains = {tuple(p.scenario.controller.flocking_params().c2_gamma) for p in full.points}
+        gains = {tuple(p.scenario.controller.law_params().c2_gamma) for p in full.points}
         assert gains == {(0.5, 0.0), (1.0, 0.0), (2.0, 0.0)}
 
 
@@ -244,7 +252,7 @@ def test_results_frame_puts_keys_parameters_and_versions_first():
 def test_parsers_register_subcommands():
     ap = argparse.ArgumentParser(prog="cosim")
     sub = ap.add_subparsers(dest="command", required=True)
-    from cosim.analysis.analysis import add_analyse_parser
+    from cosim.analysis import add_analyse_parser
 
     sw.add_sweep_parser(sub)
     add_analyse_parser(sub)
@@ -318,7 +326,7 @@ def test_a_dying_worker_loses_no_finished_run_and_resume_completes(
         assert (out / "runs" / i / "row.csv").stat().st_mtime_ns == mtimes[i]
 
     # and the analysis reads the real run folders
-    from cosim.analysis.analysis import main as analyse_main
+    from cosim.analysis import main as analyse_main
 
     assert analyse_main([str(out), "--no-figures"]) == 0
     iv = pd.read_csv(out / "analysis" / "fd_intervals.csv")
@@ -365,3 +373,220 @@ def test_the_sweep_runs_on_a_local_dask_cluster(tmp_path, sumo_env):
     assert (res["edie_flow_vph"] > 0).all()
     assert res["host"].notna().all()
     assert os.environ.get(sw.CRASH_ENV) is None
+
+
+# --------------------------------------------------------------------------------------
+# Bad options and output folders: one line, exit 2, nothing written
+# --------------------------------------------------------------------------------------
+
+
+def _one_error(capsys, *needles: str) -> str:
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: "), err
+    assert "Traceback" not in err
+    for n in needles:
+        assert n in lines[0], lines[0]
+    return lines[0]
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--workers", "0"], "--workers must be an integer >= 1, got 0"),
+    (["--workers", "-3"], "--workers must be an integer >= 1, got -3"),
+    (["--dask-local", "0"], "--dask-local must be an integer >= 1, got 0"),
+    (["--dask-local", "-1"], "--dask-local must be an integer >= 1"),
+    (["--workers", "2", "--dask-local", "2"], "--workers sets the local process pool"),
+    (["--resume", "--replace"], "either --resume"),
+    (["--scheduler", "tcp://127.0.0.1:1"], "cannot reach the Dask scheduler tcp://127.0.0.1:1"),
+    (["--scheduler", "tcp://nohost"], "not an address"),
+])
+def test_bad_execution_options_leave_no_folder(tmp_path, sumo_env, capsys, args, needle):
+    f = _write(tmp_path, TINY)
+    out = tmp_path / "out"
+    assert sw.main([str(f), "--out", str(out), "--quiet", *args]) == 2
+    _one_error(capsys, needle)
+    assert not out.exists()
+
+
+def test_output_locations_are_checked_before_anything_is_written(tmp_path, sumo_env, capsys):
+    f = _write(tmp_path, TINY)
+    a_file = tmp_path / "file.csv"
+    a_file.write_text("x")
+    assert sw.main([str(f), "--out", str(a_file), "--quiet"]) == 2
+    _one_error(capsys, "is an existing file")
+    assert sw.main([str(f), "--out", str(a_file / "sub"), "--quiet"]) == 2
+    _one_error(capsys, "which is a file")
+    assert sw.main([str(f), "--out", "/sys/cosim_sweep_test", "--quiet"]) == 2
+    _one_error(capsys, "cosim_sweep_test")
+    assert not os.path.exists("/sys/cosim_sweep_test")
+    # a folder that is not a sweep's: refused without flags, refused for --resume
+    other = tmp_path / "other"
+    other.mkdir()
+    (other / "notes.txt").write_text("mine")
+    assert sw.main([str(f), "--out", str(other), "--quiet"]) == 2
+    _one_error(capsys, "is not empty", "--replace")
+    assert sw.main([str(f), "--out", str(other), "--quiet", "--resume"]) == 2
+    _one_error(capsys, "holds no sweep plan")
+    assert [p.name for p in other.iterdir()] == ["notes.txt"]
+
+
+def test_resume_checks_that_the_folder_holds_the_same_plan(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "runs").mkdir()
+    plan = sw.load_sweep(_write(tmp_path, TINY))
+    sw.results.write_plan(out, plan)
+    other = _write(tmp_path, TINY.replace("[1500.0, 3000.0, 4500.0]", "[1500.0, 3500.0]"), "o.toml")
+    before = sorted(p.name for p in out.rglob("*"))
+    assert sw.main([str(other), "--out", str(out), "--resume", "--quiet"]) == 2
+    _one_error(capsys, "holds another plan", "'tiny', 3 runs", "1 not in the folder")
+    assert sorted(p.name for p in out.rglob("*")) == before
+
+
+def test_a_sweep_name_cannot_leave_the_outputs_folder():
+    plan = _plan('[sweep]\nname = "../../evil"\n')
+    assert sw.default_out_dir(plan) == Path("outputs") / "sweeps" / "evil"
+
+
+def test_a_folder_in_use_by_a_live_sweep_is_refused(tmp_path, capsys):
+    """Another process holds OUT/.sweep.lock (as a running sweep does): no --resume,
+    no --replace into it."""
+    f = _write(tmp_path, TINY)
+    out = tmp_path / "out"
+    out.mkdir()
+    plan = sw.load_sweep(f)
+    sw.results.write_plan(out, plan)
+    holder = subprocess.Popen(
+        [sys.executable, "-c",
+         "import fcntl, sys, time\n"
+         f"fh = open({str(out / '.sweep.lock')!r}, 'a+')\n"
+         "fcntl.flock(fh.fileno(), fcntl.LOCK_EX)\n"
+         "fh.write('{\"pid\": 4242}'); fh.flush(); print('locked', flush=True)\n"
+         "time.sleep(60)\n"],
+        stdout=subprocess.PIPE, text=True,
+    )
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        for flag in ("--resume", "--replace"):
+            assert sw.main([str(f), "--out", str(out), "--quiet", flag]) == 2
+            _one_error(capsys, "in use by another 'cosim sweep' (process 4242)")
+        assert (out / "sweep.json").is_file()
+    finally:
+        holder.kill()
+        holder.wait()
+
+
+def test_resume_refuses_while_a_run_is_still_held_by_a_live_process(tmp_path, monkeypatch):
+    """A run's STARTED marker locked by a live process (an orphan that has not ended):
+    resume waits IN_FLIGHT_WAIT_S, then refuses without touching the folder."""
+    from cosim.sweeps import execute
+
+    monkeypatch.setattr(execute, "IN_FLIGHT_WAIT_S", 0.5)
+    f = _write(tmp_path, TINY)
+    plan = sw.load_sweep(f)
+    out = tmp_path / "out"
+    run = out / "runs" / plan.points[0].run_id
+    run.mkdir(parents=True)
+    sw.results.write_plan(out, plan)
+    holder = subprocess.Popen(
+        [sys.executable, "-c",
+         "import fcntl, json, os, time\n"
+         f"fh = open({str(run / 'STARTED')!r}, 'w')\n"
+         "fcntl.flock(fh.fileno(), fcntl.LOCK_EX)\n"
+         "fh.write(json.dumps({'pid': os.getpid()})); fh.flush(); print('locked', flush=True)\n"
+         "time.sleep(60)\n"],
+        stdout=subprocess.PIPE, text=True,
+    )
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        assert execute.run_in_flight(run) == holder.pid
+        with pytest.raises(ConfigError, match=f"1 run of .* still running .*pid {holder.pid}"):
+            sw.run_sweep(plan, out, resume=True, progress=False)
+        assert sorted(p.name for p in run.iterdir()) == ["STARTED"]
+    finally:
+        holder.kill()
+        holder.wait()
+    assert execute.run_in_flight(run) is None  # the kernel released the lock
+
+
+@pytest.mark.sumo
+def test_replace_clears_the_old_sweep_and_runs_again(tmp_path, sumo_env, capsys):
+    f = _write(tmp_path, TINY.replace("[1500.0, 3000.0, 4500.0]", "[1500.0]"))
+    out = tmp_path / "out"
+    (out / "runs" / "stale").mkdir(parents=True)
+    (out / "runs" / "stale" / "trajectories.csv").write_text("old")
+    (out / "results.csv").write_text("run_id,status\nstale,ok\n")
+    assert sw.main([str(f), "--out", str(out), "--quiet", "--replace"]) == 0
+    assert not (out / "runs" / "stale").exists()
+    res = _results(out)
+    assert len(res) == 1 and (res["status"] == "ok").all() and "stale" not in res.index
+
+
+# --------------------------------------------------------------------------------------
+# A sweep whose process is killed: its workers end, resume does not run anything twice
+# --------------------------------------------------------------------------------------
+
+
+def _log(path: Path) -> list[tuple[str, str, int, float]]:
+    if not path.is_file():
+        return []
+    out = []
+    for ln in path.read_text().splitlines():
+        event, rid, pid, t = ln.split()
+        out.append((event, rid, int(pid), float(t)))
+    return out
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("start_method", ["spawn", "forkserver"])
+def test_killing_the_sweep_ends_its_workers_and_resume_runs_each_run_once(
+    tmp_path, sumo_env, monkeypatch, start_method
+):
+    """kill -9 of the sweep process while two runs are in progress: both workers end
+    within a few seconds (their watchdog sees the parent gone), none finishes its run;
+    a --resume started at once completes the grid, and no run ran twice at a time."""
+    from cosim.sweeps.execute import process_alive
+
+    repo = Path(__file__).resolve().parents[1]
+    # two runs, long enough (150 s simulated, about 2 s of wall time) to be killed in flight
+    f = _write(tmp_path, TINY.replace("duration_s = 20.0", "duration_s = 150.0")
+               .replace("[1500.0, 3000.0, 4500.0]", "[1500.0, 3000.0]"))
+    out = tmp_path / "out"
+    log = tmp_path / "log.txt"
+    monkeypatch.setenv(sw.TEST_LOG_ENV, str(log))
+    cmd = [sys.executable, "-m", "cosim.cli.main", "sweep", str(f), "--out", str(out),
+           "--workers", "2", "--quiet", "--start-method", start_method]
+    parent = subprocess.Popen(cmd, cwd=repo, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while sum(e == "start" for e, *_ in _log(log)) < 2:
+        assert time.monotonic() < deadline, "the runs did not start"
+        assert parent.poll() is None, "the sweep ended before it was killed"
+        time.sleep(0.05)
+    os.kill(parent.pid, signal.SIGKILL)
+    t_kill = time.time()
+    parent.wait()
+    orphans = {pid: rid for e, rid, pid, _ in _log(log) if e == "start"}
+    assert len(orphans) == 2
+
+    resume = subprocess.Popen(cmd + ["--resume"], cwd=repo, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True)
+    while any(process_alive(pid) for pid in orphans):
+        assert time.time() - t_kill < 5.0, "workers still running 5 s after their sweep died"
+        time.sleep(0.05)
+    stdout, stderr = resume.communicate(timeout=600)
+    assert resume.returncode == 0, stderr
+    assert "2 runs in" in stdout  # both killed runs, again
+
+    events = _log(log)
+    ended_early = {pid for e, _, pid, _ in events if e == "orphaned"}
+    assert ended_early == set(orphans)
+    assert not [e for e in events if e[0] == "end" and e[2] in orphans]
+    ends = Counter(rid for e, rid, _, _ in events if e == "end")
+    res = _results(out)
+    assert sorted(ends) == sorted(res.index) and set(ends.values()) == {1}
+    assert (res["status"] == "ok").all() and len(res) == 2
+    for e, rid, pid, t in events:  # a run restarts only after its orphan ended
+        if e == "start" and pid not in orphans:
+            gone = [t_o for e_o, r_o, p_o, t_o in events if e_o == "orphaned" and r_o == rid]
+            assert all(t > t_o for t_o in gone)

@@ -1,16 +1,24 @@
 """PNG figures (matplotlib, Agg backend): fundamental diagrams, capacity, time-space, top view.
 
 * :func:`plot_fundamental_diagram`: flow vs density and speed vs density, one curve per
-  series (CAV share x controller, ...): the seed-mean per demand level, with every run
-  and (faint) every measurement interval as points.
+  series (CAV share x controller, ...): the seed-mean per demand level, every run as a
+  faint marker of its series and every measurement interval as a grey dot.
 * :func:`plot_capacity`: capacity vs CAV share, one line per controller/variant, with
   the confidence interval as error bars.
-* :func:`plot_time_space`: trajectories ``s(t)`` coloured by speed (from a run's
-  ``trajectories.csv``: columns ``t_s, id, s_m, d_m, v_mps, is_cav``).
+* :func:`plot_time_space`: trajectories ``s(t)`` coloured by speed, CAVs and HDVs in
+  two panels (from a run's ``trajectories.csv``: ``t_s, id, s_m, d_m, v_mps, is_cav``).
 * :func:`plot_top_view`: the road seen from above at chosen times: vehicles as
   rectangles (``length_m x width_m`` at ``(s_m, d_m)``), CAVs and HDVs coloured, road
-  edges (and lane lines of the three-lane baseline) drawn.
-* :func:`plot_run`: both run figures for a run folder (road geometry from config.toml).
+  edges (and lane lines of the three-lane baseline) drawn; :func:`animate_top_view`
+  the same as a GIF.
+* :func:`plot_run`: the run figures of a run folder (road geometry and scenario name
+  from config.toml).
+
+One style for all: every series has its own colour (Okabe-Ito, colour-blind safe) and
+marker (:func:`series_style`) and a readable label (:func:`series_label`, e.g.
+"CAV 95 %, flocking"); CAVs are blue and HDVs orange everywhere; every axis names its
+unit; every title names the sweep or scenario. Each ``plot_*`` has a ``*_figure``
+twin that returns the matplotlib Figure unsaved (the tests inspect those).
 """
 
 from __future__ import annotations
@@ -31,62 +39,113 @@ from matplotlib.collections import LineCollection, PatchCollection  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch, Rectangle  # noqa: E402
 
+from cosim.analysis.tables import FD_COLUMNS  # noqa: E402
+
+#: CAVs and HDVs in every figure (and in sumo-gui: cosim.demand.routes.CAV_RGB/HDV_RGB):
+#: tab:blue and tab:orange, a colour-blind-safe pair that also differs in lightness.
 CAV_COLOUR = "tab:blue"
 HDV_COLOUR = "tab:orange"
-LINESTYLES = ("-", "--", ":", "-.")
-MARKERS = ("o", "s", "^", "D", "v", "P", "X")
+#: Series colours: the Okabe & Ito (2008) colour-blind-safe palette (yellow last: it
+#: reads poorly on white).
+PALETTE = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000",
+           "#F0E442")
+MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
+LINESTYLES = ("-", "--", "-.", ":")
+#: Per-measurement-interval points of the fundamental diagram.
+INTERVAL_COLOUR = "0.55"
+#: Speed colour map of the time-space diagram: viridis (perceptually uniform, colour-blind
+#: safe) without its lightest 15 %, so that free-flow lines stay visible on white.
+SPEED_CMAP = "viridis_to_85"
+#: A fundamental diagram whose every speed is at least this share of the free speed (the
+#: highest run speed) holds only its free-flow branch, and says so on the figure.
+FREE_FLOW_SHARE = 0.8
+#: Resolution of the animated top view (GIF), dots per inch.
+ANIMATION_DPI = 80
 #: Segments beyond this many are thinned in time for the time-space diagram.
 MAX_SEGMENTS = 400_000
 
 Edges = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
-_LABELS = {
-    "demand.cav_share": "CAV",
-    "controller.kind": "",
-    "variant": "",
-    "network.kind": "",
+_CONTROLLER_NAMES = {
+    "flocking": "flocking",
+    "boundary_points": "boundary points",
+    "formation": "formation",
+    "vicsek": "Vicsek",
+    "sumo": "SUMO-driven",
 }
+_NETWORK_NAMES = {
+    "straight": "lane-free road",
+    "three_lane": "3 lanes",
+    "ring": "ring",
+    "varying_width": "varying width",
+    "on_ramp": "on-ramp",
+    "file": "user network",
+}
+_UNITS = {"_m": "m", "_s": "s", "_mps": "m/s", "_mps2": "m/s²", "_vph": "veh/h",
+          "_vpkm": "veh/km", "_deg": "°"}
 
 
-def series_label(keys: Sequence[str], values: Sequence) -> str:
-    """'CAV 50% flocking' style label of a series."""
+def speed_cmap():
+    """The :data:`SPEED_CMAP` colour map (viridis from 0 to 0.85)."""
+    from matplotlib.colors import LinearSegmentedColormap
+
+    base = plt.get_cmap("viridis")
+    return LinearSegmentedColormap.from_list(SPEED_CMAP, base(np.linspace(0.0, 0.85, 256)))
+
+
+def series_style(k: int) -> dict:
+    """Colour, marker and line style of the k-th series (0-based).
+
+    Colours from :data:`PALETTE` and markers from :data:`MARKERS`: the first 8 series
+    differ in both; later ones repeat a colour with another marker and line style.
+    """
+    n = len(PALETTE)
+    return {"color": PALETTE[k % n], "marker": MARKERS[(k + k // n) % len(MARKERS)],
+            "linestyle": LINESTYLES[(k // n) % len(LINESTYLES)]}
+
+
+def _param_text(key: str, v) -> str:
+    name = key.split(".")[-1]
+    for suffix, unit in _UNITS.items():
+        if name.endswith(suffix):
+            value = f"{v:g}" if isinstance(v, float | int) else str(v)
+            return f"{name[: -len(suffix)].replace('_', ' ')} {value} {unit}"
+    value = f"{v:g}" if isinstance(v, float) else str(v)
+    return f"{name} = {value}"
+
+
+def series_label(keys: Sequence[str], values: Sequence, short: bool = True) -> str:
+    """A readable label of a series, e.g. ``"CAV 95 %, flocking"``,
+    ``"three lane lc2013, HDV only"``, ``"CAV 50 %, flocking, width 8 m"``.
+
+    With ``short``, a CAV share of 0 reads "HDV only" and the (idle) controller is left
+    out; :func:`series_labels` falls back to the full form where that is ambiguous.
+    """
+    pairs = [(k, v) for k, v in zip(keys, values, strict=True)
+             if not (v is None or (isinstance(v, float) and math.isnan(v)))]
+    no_cavs = short and any(k == "demand.cav_share" and float(v) == 0.0 for k, v in pairs)
     parts = []
-    for k, v in zip(keys, values, strict=True):
-        if v is None or (isinstance(v, float) and math.isnan(v)):
-            continue
+    for k, v in pairs:
         if k == "demand.cav_share":
-            parts.append(f"CAV {float(v):.0%}")
-        elif k in _LABELS:
-            parts.append(str(v))
+            parts.append("HDV only" if no_cavs else f"CAV {100 * float(v):g} %")
+        elif k == "controller.kind":
+            if not no_cavs:
+                parts.append(_CONTROLLER_NAMES.get(str(v), str(v)))
+        elif k == "variant":
+            parts.append(str(v).replace("_", " "))
+        elif k == "network.kind":
+            parts.append(_NETWORK_NAMES.get(str(v), str(v).replace("_", " ")))
         else:
-            short = k.split(".")[-1]
-            parts.append(f"{short}={v:g}" if isinstance(v, float) else f"{short}={v}")
-    return " ".join(parts) or "all runs"
+            parts.append(_param_text(k, v))
+    return ", ".join(parts) or "all runs"
 
 
-def _styles(frame: pd.DataFrame, series_cols: list[str]):
-    """Colour by CAV share (viridis), line style and marker by the rest of the series."""
-    cmap = plt.get_cmap("viridis")
-    rest = [c for c in series_cols if c != "demand.cav_share"]
-    rest_keys = (
-        list(dict.fromkeys(map(tuple, frame[rest].astype(str).to_numpy()))) if rest else [()]
-    )
-    shares = (sorted(frame["demand.cav_share"].dropna().unique())
-              if "demand.cav_share" in series_cols else [])
-
-    def style(row_keys: dict) -> dict:
-        if "demand.cav_share" in row_keys and len(shares) > 0:
-            share = float(row_keys["demand.cav_share"])
-            colour = cmap(0.85 * share) if len(shares) > 1 else cmap(0.3)
-        else:
-            colour = None
-        k = rest_keys.index(tuple(str(row_keys[c]) for c in rest)) if rest else 0
-        if colour is None:
-            colour = plt.get_cmap("tab10")(k % 10)
-        return {"color": colour, "linestyle": LINESTYLES[k % len(LINESTYLES)],
-                "marker": MARKERS[k % len(MARKERS)]}
-
-    return style
+def series_labels(keys: Sequence[str], rows: Sequence[Sequence]) -> list[str]:
+    """Labels of several series (one value row each), short where they stay distinct."""
+    short = [series_label(keys, r) for r in rows]
+    if len(set(short)) == len(short):
+        return short
+    return [series_label(keys, r, short=False) for r in rows]
 
 
 def _groups(frame: pd.DataFrame, cols: list[str]):
@@ -98,6 +157,91 @@ def _groups(frame: pd.DataFrame, cols: list[str]):
         yield dict(zip(cols, key, strict=True)), g
 
 
+def free_flow_only(speeds: Sequence[float] | np.ndarray,
+                   share: float = FREE_FLOW_SHARE) -> tuple[bool, float]:
+    """(True if no speed falls below ``share`` x the free speed, the free speed in m/s).
+
+    The free speed is the highest finite speed; with no finite speed: (False, NaN).
+    """
+    v = np.asarray(speeds, dtype=float)
+    v = v[np.isfinite(v)]
+    if len(v) == 0:
+        return False, math.nan
+    free = float(v.max())
+    return bool(free > 0 and v.min() >= share * free), free
+
+
+def _top(frames: Sequence[pd.DataFrame], *cols: str) -> float:
+    """Upper axis limit: 5 % above the largest finite value of ``cols`` (1 if none)."""
+    vals = np.concatenate([np.asarray(f[c], dtype=float).ravel()
+                           for f in frames for c in cols if c in f] or [np.zeros(0)])
+    vals = vals[np.isfinite(vals)]
+    return 1.05 * float(vals.max()) if len(vals) and vals.max() > 0 else 1.0
+
+
+def _title(what: str, name: str | None) -> str:
+    return f"{what}: {name}" if name else what
+
+
+def fundamental_diagram_figure(
+    runs: pd.DataFrame,
+    series_cols: Sequence[str] = ("demand.cav_share", "controller.kind"),
+    demand_col: str | None = None,
+    intervals: pd.DataFrame | None = None,
+    title: str | None = None,
+):
+    """The figure of :func:`plot_fundamental_diagram` (a matplotlib Figure, not saved)."""
+    series_cols = [c for c in series_cols if c in runs]
+    groups = list(_groups(runs, series_cols))
+    labels = series_labels(series_cols, [list(k.values()) for k, _ in groups])
+    fig, (ax_q, ax_v) = plt.subplots(1, 2, figsize=(12, 5))
+    speeds = [runs["space_mean_speed_mps"].to_numpy(float)]
+    handles = []
+    if intervals is not None and len(intervals):
+        for ax, y in ((ax_q, "edie_flow_vph"), (ax_v, "space_mean_speed_mps")):
+            ax.scatter(intervals["edie_density_vpkm"], intervals[y], s=7, alpha=0.5,
+                       color=INTERVAL_COLOUR, linewidths=0, zorder=1)
+        speeds.append(intervals["space_mean_speed_mps"].to_numpy(float))
+        handles.append(Line2D([], [], linestyle="", marker="o", markersize=4, alpha=0.6,
+                              color=INTERVAL_COLOUR, label="per interval"))
+    for k, ((_keys, g), label) in enumerate(zip(groups, labels, strict=True)):
+        st = series_style(k)
+        for ax, y in ((ax_q, "edie_flow_vph"), (ax_v, "space_mean_speed_mps")):
+            ax.scatter(g["edie_density_vpkm"], g[y], s=18, alpha=0.45, color=st["color"],
+                       marker=st["marker"], linewidths=0, zorder=2)
+        if demand_col and demand_col in g:
+            curve = g.groupby(demand_col)[list(FD_COLUMNS)].mean()
+        else:
+            curve = g.sort_values("edie_density_vpkm")
+        for ax, y in ((ax_q, "edie_flow_vph"), (ax_v, "space_mean_speed_mps")):
+            (line,) = ax.plot(curve["edie_density_vpkm"], curve[y], markersize=5, label=label,
+                              zorder=3, **st)
+        handles.insert(k, line)
+    handles.append(Line2D([], [], linestyle="", marker="o", markersize=5, color="0.3",
+                          alpha=0.45, label="per run (marker of its series)"))
+    ax_q.set_xlabel("density (Edie), veh/km")
+    ax_q.set_ylabel("flow (Edie), veh/h")
+    ax_v.set_xlabel("density (Edie), veh/km")
+    ax_v.set_ylabel("space-mean speed, m/s")
+    frames = [runs] + ([intervals] if intervals is not None and len(intervals) else [])
+    for ax, y in ((ax_q, "edie_flow_vph"), (ax_v, "space_mean_speed_mps")):
+        ax.grid(alpha=0.3)
+        ax.set_xlim(0, _top(frames, "edie_density_vpkm"))
+        ax.set_ylim(0, _top(frames, y))
+    ax_q.legend(handles=handles, fontsize=8, loc="best", title="lines: mean over seeds",
+                title_fontsize=8)
+    only_free, v_free = free_flow_only(np.concatenate(speeds))
+    if only_free:
+        ax_q.text(0.98, 0.03,
+                  "free-flow branch only: no congested point\n"
+                  f"(every speed ≥ {FREE_FLOW_SHARE:.0%} of the free speed, {v_free:.1f} m/s)",
+                  transform=ax_q.transAxes, ha="right", va="bottom", fontsize=8,
+                  bbox={"facecolor": "white", "edgecolor": "0.6", "alpha": 0.9})
+    fig.suptitle(_title("Fundamental diagram", title))
+    fig.tight_layout()
+    return fig
+
+
 def plot_fundamental_diagram(
     runs: pd.DataFrame,
     out_path: str | Path,
@@ -106,57 +250,61 @@ def plot_fundamental_diagram(
     intervals: pd.DataFrame | None = None,
     title: str | None = None,
 ) -> Path:
-    """Flow-density and speed-density diagrams, one curve per series.
+    """Flow-density and speed-density diagrams, one curve per series; the PNG path.
 
     Args:
-        runs: one row per run with ``edie_density_vpkm``, ``edie_flow_vph``,
-            ``space_mean_speed_mps``, the series columns and the demand column
-            (:func:`cosim.analysis.analysis.fd_runs`).
+        runs: one row per run with ``edie_density_vpkm`` (veh/km), ``edie_flow_vph``
+            (veh/h), ``space_mean_speed_mps`` (m/s), the series columns and the demand
+            column (:func:`cosim.analysis.tables.fd_runs`).
         out_path: PNG file to write.
-        series_cols: columns that define a curve.
+        series_cols: columns that define a curve (one colour and marker each).
         demand_col: the demand level; curves join the seed-means per level (in order of
             demand). Without it, the curve joins the runs sorted by density.
-        intervals: per-interval points (:func:`cosim.analysis.analysis.fd_intervals`), drawn faint.
+        intervals: per-interval points (:func:`cosim.analysis.tables.fd_intervals`), drawn
+            as grey dots ("per interval" in the legend).
+        title: the sweep's or scenario's name, in the figure title.
+
+    A diagram whose speeds all stay above :data:`FREE_FLOW_SHARE` of the free speed says
+    on the figure that it holds only the free-flow branch.
     """
-    series_cols = [c for c in series_cols if c in runs]
-    style = _styles(runs, series_cols)
-    fig, (ax_q, ax_v) = plt.subplots(1, 2, figsize=(12, 4.8))
-    for keys, g in _groups(runs, series_cols):
-        st = style(keys)
-        label = series_label(list(keys), list(keys.values()))
-        if intervals is not None and len(intervals):
-            sel = intervals
-            for c, v in keys.items():
-                sel = sel[(sel[c] == v) | (sel[c].isna() & pd.isna(v))]
-            ax_q.scatter(sel["edie_density_vpkm"], sel["edie_flow_vph"], s=6, alpha=0.15,
-                         color=st["color"], linewidths=0)
-            ax_v.scatter(sel["edie_density_vpkm"], sel["space_mean_speed_mps"], s=6,
-                         alpha=0.15, color=st["color"], linewidths=0)
-        ax_q.scatter(g["edie_density_vpkm"], g["edie_flow_vph"], s=14, alpha=0.5,
-                     color=st["color"], marker=st["marker"], linewidths=0)
-        ax_v.scatter(g["edie_density_vpkm"], g["space_mean_speed_mps"], s=14, alpha=0.5,
-                     color=st["color"], marker=st["marker"], linewidths=0)
-        if demand_col and demand_col in g:
-            curve = g.groupby(demand_col)[
-                ["edie_density_vpkm", "edie_flow_vph", "space_mean_speed_mps"]].mean()
-        else:
-            curve = g.sort_values("edie_density_vpkm")
-        ax_q.plot(curve["edie_density_vpkm"], curve["edie_flow_vph"], color=st["color"],
-                  linestyle=st["linestyle"], marker=st["marker"], markersize=4, label=label)
-        ax_v.plot(curve["edie_density_vpkm"], curve["space_mean_speed_mps"],
-                  color=st["color"], linestyle=st["linestyle"], marker=st["marker"],
-                  markersize=4, label=label)
-    ax_q.set_xlabel("density (Edie), veh/km")
-    ax_q.set_ylabel("flow (Edie), veh/h")
-    ax_v.set_xlabel("density (Edie), veh/km")
-    ax_v.set_ylabel("space-mean speed, m/s")
-    for ax in (ax_q, ax_v):
-        ax.grid(alpha=0.3)
-        ax.set_xlim(left=0)
-        ax.set_ylim(bottom=0)
-    ax_q.legend(fontsize=8, loc="best")
-    fig.suptitle(f"Fundamental diagram{': ' + title if title else ''}")
+    fig = fundamental_diagram_figure(runs, series_cols, demand_col, intervals, title)
     return _save(fig, out_path)
+
+
+def capacity_figure(
+    capacity: pd.DataFrame,
+    series_cols: Sequence[str] = ("demand.cav_share", "controller.kind"),
+    title: str | None = None,
+):
+    """The figure of :func:`plot_capacity` (a matplotlib Figure, not saved)."""
+    rest = [c for c in series_cols if c in capacity and c != "demand.cav_share"]
+    groups = list(_groups(capacity, rest))
+
+    def only_share(g):  # a series at one CAV share is labelled with it ("HDV only", ...)
+        shares = g["demand.cav_share"].dropna().unique()
+        return float(shares[0]) if len(shares) == 1 else None
+
+    at = 1 if rest[:1] == ["variant"] else 0  # the label reads variant, share, controller
+    labels = series_labels(rest[:at] + ["demand.cav_share"] + rest[at:],
+                           [[*list(k.values())[:at], only_share(g), *list(k.values())[at:]]
+                            for k, g in groups])
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    for k, ((_keys, g), label) in enumerate(zip(groups, labels, strict=True)):
+        g = g.sort_values("demand.cav_share")
+        y = g["capacity_vph"].to_numpy(float)
+        lo = g.get("capacity_ci_low_vph", pd.Series(np.nan, index=g.index)).to_numpy(float)
+        err = np.where(np.isfinite(lo), y - lo, 0.0)
+        ax.errorbar(100 * g["demand.cav_share"].to_numpy(float), y, yerr=err, capsize=3,
+                    label=label if rest else "mean over seeds", **series_style(k))
+    ax.set_xlabel("CAV share, %")
+    ax.set_ylabel("capacity (max mean flow), veh/h")
+    ax.grid(alpha=0.3)
+    ax.set_xlim(-5, 105)
+    ax.set_ylim(0, _top([capacity], "capacity_vph", "capacity_ci_high_vph"))
+    ax.legend(fontsize=8)
+    ax.set_title(f"{_title('Capacity', title)} (error bars: CI over seeds)", fontsize=10)
+    fig.tight_layout()
+    return fig
 
 
 def plot_capacity(
@@ -165,43 +313,13 @@ def plot_capacity(
     series_cols: Sequence[str] = ("demand.cav_share", "controller.kind"),
     title: str | None = None,
 ) -> Path:
-    """Capacity (veh/h) vs CAV share, one line per remaining series key, CI error bars."""
-    rest = [c for c in series_cols if c in capacity and c != "demand.cav_share"]
-    fig, ax = plt.subplots(figsize=(7, 4.5))
-    for k, (keys, g) in enumerate(_groups(capacity, rest)):
-        g = g.sort_values("demand.cav_share")
-        y = g["capacity_vph"].to_numpy(float)
-        lo = g.get("capacity_ci_low_vph", pd.Series(np.nan, index=g.index)).to_numpy(float)
-        err = np.where(np.isfinite(lo), y - lo, 0.0)
-        ax.errorbar(100 * g["demand.cav_share"].to_numpy(float), y, yerr=err, capsize=3,
-                    marker=MARKERS[k % len(MARKERS)], linestyle=LINESTYLES[k % 4],
-                    label=series_label(list(keys), list(keys.values())) if keys else None)
-    ax.set_xlabel("CAV share, %")
-    ax.set_ylabel("capacity (max mean flow), veh/h")
-    ax.grid(alpha=0.3)
-    ax.set_ylim(bottom=0)
-    if rest:
-        ax.legend(fontsize=8)
-    ax.set_title(f"Capacity{': ' + title if title else ''} (error bars: CI over seeds)",
-                 fontsize=10)
-    return _save(fig, out_path)
+    """Capacity (veh/h) vs CAV share (%), one line per remaining series key (colour and
+    marker each), confidence-interval error bars; the PNG path."""
+    return _save(capacity_figure(capacity, series_cols, title), out_path)
 
 
-def plot_time_space(
-    traj: pd.DataFrame | str | Path,
-    out_path: str | Path,
-    period: float | None = None,
-    title: str | None = None,
-    vmax: float | None = None,
-) -> Path:
-    """Time-space diagram: every vehicle's ``s(t)`` as a line coloured by its speed.
-
-    Args:
-        traj: trajectories (``t_s, id, s_m, v_mps``) or the path of trajectories.csv.
-        period: ring circumference, m: lines break where ``s`` wraps (detected anyway
-            as a backward jump of more than half the span).
-    """
-    tr = _read_traj(traj)
+def _time_space_segments(tr: pd.DataFrame, period: float | None):
+    """(segments (M, 2, 2) of (t s, s m), speed per segment m/s) of one vehicle class."""
     tr = tr.sort_values(["id", "t_s"], kind="stable")
     t = tr["t_s"].to_numpy(float)
     s = tr["s_m"].to_numpy(float)
@@ -216,19 +334,104 @@ def plot_time_space(
         idx = idx[:: int(math.ceil(len(idx) / MAX_SEGMENTS))]
     segs = np.stack([np.column_stack([t[idx], s[idx]]),
                      np.column_stack([t[idx + 1], s[idx + 1]])], axis=1)
-    fig, ax = plt.subplots(figsize=(10, 6))
-    lc = LineCollection(segs, cmap="RdYlGn", linewidths=0.6, rasterized=True)
-    lc.set_array(0.5 * (v[idx] + v[idx + 1]))
-    lc.set_clim(0.0, vmax or (float(np.nanmax(v)) if len(v) else 1.0))
-    ax.add_collection(lc)
-    if len(t):
-        ax.set_xlim(t.min(), t.max())
-        ax.set_ylim(s.min(), s.max())
-    ax.set_xlabel("time, s")
-    ax.set_ylabel("position along the road s, m")
-    fig.colorbar(lc, ax=ax, label="speed, m/s")
-    ax.set_title(title or "Time-space diagram")
-    return _save(fig, out_path)
+    return segs, 0.5 * (v[idx] + v[idx + 1])
+
+
+def time_space_figure(
+    traj: pd.DataFrame | str | Path,
+    period: float | None = None,
+    title: str | None = None,
+    vmax: float | None = None,
+):
+    """The figure of :func:`plot_time_space`: CAVs and HDVs in two panels."""
+    tr = _read_traj(traj)
+    t_all = tr["t_s"].to_numpy(float)
+    s_all = tr["s_m"].to_numpy(float)
+    v_all = tr["v_mps"].to_numpy(float)
+    vmax = vmax or (float(np.nanmax(v_all)) if len(v_all) else 1.0)
+    if "is_cav" in tr:
+        cav = tr["is_cav"].astype(bool).to_numpy()
+        classes = [("CAVs", CAV_COLOUR, tr[cav]), ("HDVs", HDV_COLOUR, tr[~cav])]
+    else:
+        classes = [("all vehicles", "k", tr)]
+    fig, axes = plt.subplots(len(classes), 1, figsize=(10, 3.2 * len(classes) + 0.8),
+                             sharex=True, sharey=True, squeeze=False, layout="constrained")
+    lc = None
+    for ax, (name, colour, part) in zip(axes[:, 0], classes, strict=True):
+        n_veh = part["id"].nunique()
+        if n_veh:
+            segs, speed = _time_space_segments(part, period)
+            lc = LineCollection(segs, cmap=speed_cmap(), linewidths=0.6, rasterized=True)
+            lc.set_array(speed)
+            lc.set_clim(0.0, vmax)
+            ax.add_collection(lc)
+        else:
+            ax.text(0.5, 0.5, f"no {name} in this run", transform=ax.transAxes,
+                    ha="center", va="center", color="0.4")
+        ax.set_title(f"{name} ({n_veh} vehicles)", color=colour, fontsize=10, loc="left")
+        ax.set_ylabel("position s, m")
+        if len(t_all):
+            ax.set_xlim(t_all.min(), t_all.max())
+            ax.set_ylim(s_all.min(), s_all.max())
+    axes[-1, 0].set_xlabel("time, s")
+    fig.suptitle(title or "Time-space diagram")
+    if lc is not None:
+        fig.colorbar(lc, ax=list(axes[:, 0]), label="speed, m/s")
+    return fig
+
+
+def plot_time_space(
+    traj: pd.DataFrame | str | Path,
+    out_path: str | Path,
+    period: float | None = None,
+    title: str | None = None,
+    vmax: float | None = None,
+) -> Path:
+    """Time-space diagram: every vehicle's ``s(t)`` as a line coloured by its speed, CAVs
+    and HDVs in two panels on one speed scale; the PNG path.
+
+    Args:
+        traj: trajectories (``t_s, id, s_m, v_mps, is_cav``) or the path of trajectories.csv.
+        period: ring circumference, m: lines break where ``s`` wraps (detected anyway
+            as a backward jump of more than half the span).
+        title: the figure title (name the scenario).
+        vmax: top of the speed colour scale, m/s (default: the highest speed).
+    """
+    return _save(time_space_figure(traj, period, title, vmax), out_path)
+
+
+def top_view_figure(
+    traj: pd.DataFrame | str | Path,
+    times: Sequence[float] | None = None,
+    s_range: tuple[float, float] | None = None,
+    edges: Edges | None = None,
+    lane_lines: Sequence[float] = (),
+    title: str | None = None,
+    window_m: float = 300.0,
+):
+    """The figure of :func:`plot_top_view` (a matplotlib Figure, not saved)."""
+    tr = _read_traj(traj)
+    steps = np.unique(tr["t_s"].to_numpy(float))
+    if len(steps) == 0:
+        raise ValueError("trajectories are empty")
+    if times is None:
+        times = [steps[int(q * (len(steps) - 1))] for q in (0.25, 0.5, 0.75)]
+    picks = [float(steps[np.abs(steps - tq).argmin()]) for tq in times]
+    s_range, s_grid, (y_lo, y_hi) = _view_window(tr, picks[len(picks) // 2], s_range, edges,
+                                                 window_m)
+    fig, axes = plt.subplots(len(picks), 1, figsize=(12, 1.2 + 1.5 * len(picks)),
+                             squeeze=False, sharex=True)
+    for ax, tq in zip(axes[:, 0], picks, strict=True):
+        _draw_road(ax, s_grid, edges, lane_lines, s_range, (y_lo, y_hi))
+        _draw_vehicles(ax, tr[tr["t_s"] == tq], s_range)
+        ax.text(0.005, 0.95, f"t = {tq:.1f} s", transform=ax.transAxes, va="top",
+                fontsize=8, bbox={"facecolor": "white", "alpha": 0.7, "linewidth": 0})
+    axes[-1, 0].set_xlabel("position s, m (lateral axis stretched)")
+    axes[0, 0].legend(handles=_vehicle_handles(edges, lane_lines), loc="upper right",
+                      fontsize=7, ncol=4)
+    fig.suptitle(title or "Top view")
+    fig.tight_layout()
+    return fig
 
 
 def plot_top_view(
@@ -251,30 +454,20 @@ def plot_top_view(
             of the vehicles at the middle time (or the whole road if shorter).
         edges: ``edges(s) -> (right, left)`` lateral road edges, m (None: not drawn).
         lane_lines: lateral positions of lane markings (three-lane baseline), m.
+        title: the figure title (name the scenario).
     """
-    tr = _read_traj(traj)
-    steps = np.unique(tr["t_s"].to_numpy(float))
-    if len(steps) == 0:
-        raise ValueError("trajectories are empty")
-    if times is None:
-        times = [steps[int(q * (len(steps) - 1))] for q in (0.25, 0.5, 0.75)]
-    picks = [float(steps[np.abs(steps - tq).argmin()]) for tq in times]
-    s_range, s_grid, (y_lo, y_hi) = _view_window(tr, picks[len(picks) // 2], s_range, edges,
-                                                 window_m)
-    fig, axes = plt.subplots(len(picks), 1, figsize=(12, 0.9 + 1.5 * len(picks)),
-                             squeeze=False)
-    for ax, tq in zip(axes[:, 0], picks, strict=True):
-        _draw_road(ax, s_grid, edges, lane_lines, s_range, (y_lo, y_hi))
-        _draw_vehicles(ax, tr[tr["t_s"] == tq], s_range)
-        ax.text(0.005, 0.95, f"t = {tq:.1f} s", transform=ax.transAxes, va="top",
-                fontsize=8, bbox={"facecolor": "white", "alpha": 0.7, "linewidth": 0})
-    axes[-1, 0].set_xlabel("s, m (lateral axis stretched)")
+    fig = top_view_figure(traj, times, s_range, edges, lane_lines, title, window_m)
+    return _save(fig, out_path)
+
+
+def _vehicle_handles(edges: Edges | None, lane_lines: Sequence[float] = ()) -> list:
     handles = [Patch(color=CAV_COLOUR, label="CAV"), Patch(color=HDV_COLOUR, label="HDV")]
     if edges is not None:
         handles.append(Line2D([], [], color="k", label="road edge"))
-    axes[0, 0].legend(handles=handles, loc="upper right", fontsize=7, ncol=3)
-    fig.suptitle(title or "Top view")
-    return _save(fig, out_path)
+    if len(lane_lines):
+        handles.append(Line2D([], [], color="0.5", linestyle="--", linewidth=0.8,
+                              label="lane line"))
+    return handles
 
 
 def _view_window(tr: pd.DataFrame, t_mid: float, s_range, edges: Edges | None,
@@ -309,7 +502,7 @@ def _draw_road(ax, s_grid, edges: Edges | None, lane_lines, s_range, y_lims) -> 
         ax.axhline(y, color="0.5", linestyle="--", linewidth=0.8)
     ax.set_xlim(*s_range)
     ax.set_ylim(*y_lims)
-    ax.set_ylabel("d, m")
+    ax.set_ylabel("lateral d, m")
 
 
 def _draw_vehicles(ax, now: pd.DataFrame, s_range) -> PatchCollection:
@@ -320,6 +513,63 @@ def _draw_vehicles(ax, now: pd.DataFrame, s_range) -> PatchCollection:
     colours = np.where(now["is_cav"].to_numpy(bool), CAV_COLOUR, HDV_COLOUR)
     return ax.add_collection(PatchCollection(rects, facecolors=list(colours), edgecolors="k",
                                              linewidths=0.3))
+
+
+def top_view_animation(
+    traj: pd.DataFrame | str | Path,
+    t_range: tuple[float, float] | None = None,
+    every_s: float = 0.5,
+    fps: int = 10,
+    s_range: tuple[float, float] | None = None,
+    edges: Edges | None = None,
+    lane_lines: Sequence[float] = (),
+    title: str | None = None,
+    window_m: float = 300.0,
+):
+    """(Figure, FuncAnimation) of :func:`animate_top_view`, not saved."""
+    from matplotlib.animation import FuncAnimation
+
+    tr = _read_traj(traj)
+    steps = np.unique(tr["t_s"].to_numpy(float))
+    if len(steps) == 0:
+        raise ValueError("trajectories are empty")
+    if every_s <= 0 or fps <= 0:
+        raise ValueError("every_s and fps must be > 0")
+    if t_range is None:
+        t_range = (max(float(steps[0]), float(steps[-1]) - 30.0), float(steps[-1]))
+    wanted = np.arange(t_range[0], t_range[1] + 1e-9, every_s)
+    k = np.clip(np.searchsorted(steps, wanted), 1, max(len(steps) - 1, 1))
+    if len(steps) > 1:  # the nearer of the recorded steps either side
+        k = np.where(np.abs(steps[k - 1] - wanted) <= np.abs(steps[k] - wanted), k - 1, k)
+    else:
+        k = np.zeros(len(wanted), dtype=int)
+    frames = np.unique(steps[k])
+    frames = frames[(frames >= t_range[0] - every_s) & (frames <= t_range[1] + every_s)]
+    if len(frames) == 0:
+        raise ValueError(f"no recorded step in t_range {t_range}")
+    s_range, s_grid, y_lims = _view_window(tr, float(frames[len(frames) // 2]), s_range,
+                                           edges, window_m)
+    by_t = dict(tuple(tr.groupby("t_s")))
+    fig, ax = plt.subplots(figsize=(12, 3.0))
+    _draw_road(ax, s_grid, edges, lane_lines, s_range, y_lims)
+    ax.set_xlabel("position s, m (lateral axis stretched)")
+    ax.legend(handles=_vehicle_handles(edges, lane_lines), loc="upper right", fontsize=7,
+              ncol=4)
+    ax.set_title(title or "Top view")
+    label = ax.text(0.005, 0.95, "", transform=ax.transAxes, va="top", fontsize=8,
+                    bbox={"facecolor": "white", "alpha": 0.7, "linewidth": 0})
+    fig.tight_layout()  # fixed once: every frame keeps the axis labels inside the picture
+    drawn: list = []
+
+    def update(t):
+        for artist in drawn:
+            artist.remove()
+        drawn.clear()
+        drawn.append(_draw_vehicles(ax, by_t.get(t, tr.iloc[:0]), s_range))
+        label.set_text(f"t = {t:.1f} s")
+        return [*drawn, label]
+
+    return fig, FuncAnimation(fig, update, frames=list(frames), blit=False)
 
 
 def animate_top_view(
@@ -343,51 +593,13 @@ def animate_top_view(
         fps: frames per second of the GIF (real time at ``every_s * fps = 1``).
         s_range, edges, lane_lines, window_m: as for :func:`plot_top_view`.
     """
-    from matplotlib.animation import FuncAnimation, PillowWriter
+    from matplotlib.animation import PillowWriter
 
-    tr = _read_traj(traj)
-    steps = np.unique(tr["t_s"].to_numpy(float))
-    if len(steps) == 0:
-        raise ValueError("trajectories are empty")
-    if every_s <= 0 or fps <= 0:
-        raise ValueError("every_s and fps must be > 0")
-    if t_range is None:
-        t_range = (max(float(steps[0]), float(steps[-1]) - 30.0), float(steps[-1]))
-    wanted = np.arange(t_range[0], t_range[1] + 1e-9, every_s)
-    k = np.clip(np.searchsorted(steps, wanted), 1, max(len(steps) - 1, 1))
-    if len(steps) > 1:  # the nearer of the recorded steps either side
-        k = np.where(np.abs(steps[k - 1] - wanted) <= np.abs(steps[k] - wanted), k - 1, k)
-    else:
-        k = np.zeros(len(wanted), dtype=int)
-    frames = np.unique(steps[k])
-    frames = frames[(frames >= t_range[0] - every_s) & (frames <= t_range[1] + every_s)]
-    if len(frames) == 0:
-        raise ValueError(f"no recorded step in t_range {t_range}")
-    s_range, s_grid, y_lims = _view_window(tr, float(frames[len(frames) // 2]), s_range,
-                                           edges, window_m)
-    by_t = dict(tuple(tr.groupby("t_s")))
-    fig, ax = plt.subplots(figsize=(12, 2.4))
-    _draw_road(ax, s_grid, edges, lane_lines, s_range, y_lims)
-    ax.set_xlabel("s, m (lateral axis stretched)")
-    handles = [Patch(color=CAV_COLOUR, label="CAV"), Patch(color=HDV_COLOUR, label="HDV")]
-    ax.legend(handles=handles, loc="upper right", fontsize=7, ncol=2)
-    ax.set_title(title or "Top view")
-    label = ax.text(0.005, 0.95, "", transform=ax.transAxes, va="top", fontsize=8,
-                    bbox={"facecolor": "white", "alpha": 0.7, "linewidth": 0})
-    drawn: list = []
-
-    def update(t):
-        for artist in drawn:
-            artist.remove()
-        drawn.clear()
-        drawn.append(_draw_vehicles(ax, by_t.get(t, tr.iloc[:0]), s_range))
-        label.set_text(f"t = {t:.1f} s")
-        return [*drawn, label]
-
-    anim = FuncAnimation(fig, update, frames=list(frames), blit=False)
+    fig, anim = top_view_animation(traj, t_range, every_s, fps, s_range, edges, lane_lines,
+                                   title, window_m)
     out = Path(out_path)
     out.parent.mkdir(parents=True, exist_ok=True)
-    anim.save(out, writer=PillowWriter(fps=fps), dpi=80)
+    anim.save(out, writer=PillowWriter(fps=fps), dpi=ANIMATION_DPI)
     plt.close(fig)
     return out
 
@@ -431,15 +643,17 @@ def plot_run(
     t_range: tuple[float, float] | None = None,
 ) -> list[Path]:
     """Time-space diagram and top view of one run folder (needs trajectories.csv);
-    with ``animate`` also ``top_view.gif`` over ``t_range`` (s; default the last 30 s)."""
+    with ``animate`` also ``top_view.gif`` over ``t_range`` (s; default the last 30 s).
+    Titles name the scenario (config.toml) and the run folder."""
     run_dir = Path(run_dir)
     out = Path(out_dir) if out_dir is not None else run_dir / "figures"
     tr = _read_traj(run_dir / "trajectories.csv")
-    network = {}
+    cfg = {}
     if (run_dir / "config.toml").is_file():
-        network = tomllib.loads((run_dir / "config.toml").read_text()).get("network", {})
-    edges, lanes, period = road_geometry(network)
-    name = run_dir.name
+        cfg = tomllib.loads((run_dir / "config.toml").read_text())
+    edges, lanes, period = road_geometry(cfg.get("network", {}))
+    scenario = cfg.get("scenario", {}).get("name")
+    name = f"{scenario} (run {run_dir.name})" if scenario else f"run {run_dir.name}"
     files = [
         plot_time_space(tr, out / f"{prefix}time_space.png", period=period,
                         title=f"Time-space diagram: {name}"),

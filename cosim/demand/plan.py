@@ -1,4 +1,16 @@
-"""TODO docstring."""
+"""Which vehicles depart when and where: the demand as plain data (no SUMO).
+
+:func:`plan_vehicles` draws every vehicle of a run from the :class:`DemandSpec`, the
+road and the seed (``numpy.random.default_rng(seed)``): kind (CAV or human driver),
+size class, desired speed, departure time, lateral position and speed. The SUMO
+route file (:mod:`cosim.demand.routes`) and the SUMO-free road world
+(:mod:`cosim.sim.road_world`) both consume this plan.
+
+* Open roads: arrivals (Poisson or uniform headways) over ``[0, horizon_s)``, placed
+  in lateral slots (``insertion = "slots"``) or at random lateral positions.
+* Rings: ``round(density x length)`` vehicles placed at t = 0, evenly staggered over
+  the width or at random without overlaps.
+"""
 
 from __future__ import annotations
 
@@ -40,6 +52,13 @@ class _Vehicle:
     depart_lane: str
     depart_speed: str
     insertion_checks: str | None = None
+    # plain numbers for worlds that do not read SUMO's strings
+    is_cav: bool = False
+    length_m: float = 0.0
+    width_m: float = 0.0
+    lat_m: float | None = None  # lateral centre at departure, m (None: lane centre)
+    centre_s_m: float | None = None  # ring: centre position at t = 0, m (None: road start)
+    v0_mps: float | None = None  # departure speed, m/s (None: the desired speed)
 
 
 def arrival_times(
@@ -87,9 +106,9 @@ def _lateral(width_road: float, width_car: np.ndarray, how: str, rng: np.random.
 
 def _open_stream(
     net: RoadNetwork, demand: DemandSpec, rng: np.random.Generator,
-    origin: str, rate_vph: float, road_width: float,
+    origin: str, rate_vph: float, road_width: float, horizon_s: float,
 ) -> list[_Vehicle]:
-    times = arrival_times(rate_vph, demand.duration_s, demand.arrivals, rng)
+    times = arrival_times(rate_vph, horizon_s, demand.arrivals, rng)
     n = len(times)
     is_cav, cls, speed = _draw_common(n, demand, rng)
     widths = np.array([demand.size_classes[c][1] for c in cls])
@@ -117,6 +136,11 @@ def _open_stream(
                 depart_lat=None if multi else f"{lat[i]:.3f}",
                 depart_lane=str(lanes[i]) if multi else "0",
                 depart_speed=f"{v_depart[i]:.3f}" if slotted else demand.depart_speed,
+                is_cav=bool(is_cav[i]),
+                length_m=float(demand.size_classes[cls[i]][0]),
+                width_m=float(widths[i]),
+                lat_m=None if multi else float(lat[i]),
+                v0_mps=float(v_depart[i]) if slotted else float(speed[i]),
             )
         )
     return out
@@ -282,6 +306,46 @@ def _ring_vehicles(net: RoadNetwork, demand: DemandSpec, rng: np.random.Generato
                 depart_lane="0",
                 depart_speed=f"{v_init:.3f}",
                 insertion_checks="none",
+                is_cav=bool(is_cav[i]),
+                length_m=float(lengths[i]),
+                width_m=float(widths[i]),
+                lat_m=float(d[i]),
+                centre_s_m=float(np.mod(centre_s[i], net.length_m)),
+                v0_mps=float(v_init),
             )
         )
     return out
+
+
+@dataclass(frozen=True)
+class DemandPlan:
+    """Every vehicle of a run and how they arrive.
+
+    Attributes:
+        vehicles: the planned vehicles in departure order.
+        process: "poisson", "uniform" or "ring_initial" (all placed at t = 0).
+        ring_route_repeat: the ``repeat`` count of the ring routes (ring only).
+    """
+
+    vehicles: list
+    process: str
+    ring_route_repeat: int | None = None
+
+
+def plan_vehicles(net: RoadNetwork, demand: DemandSpec, seed: int, horizon_s: float) -> DemandPlan:
+    """The run's vehicles (see the module docstring): departures in ``[0, horizon_s)``, s.
+
+    Deterministic in (``net``, ``demand``, ``seed``, ``horizon_s``).
+    """
+    rng = np.random.default_rng(seed)
+    if net.periodic:
+        vehicles = _ring_vehicles(net, demand, rng)
+        return DemandPlan(vehicles, "ring_initial", ring_route_repeat(net, horizon_s))
+    vehicles = _open_stream(net, demand, rng, "main", demand.inflow_vph, float(net.width_at(0)),
+                            horizon_s)
+    if net.ramp_route and demand.ramp_inflow_vph > 0:
+        ramp_w = net.ramp_width_m or net.width_m
+        vehicles += _open_stream(net, demand, rng, "ramp", demand.ramp_inflow_vph, ramp_w,
+                                 horizon_s)
+    vehicles.sort(key=lambda v: (v.depart, v.vid))
+    return DemandPlan(vehicles, demand.arrivals)

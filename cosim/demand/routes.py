@@ -1,4 +1,17 @@
-"""TODO docstring."""
+"""SUMO route files (``.rou.xml``) of a demand plan: vehicle types, routes, vehicles.
+
+Every vehicle is written explicitly, one ``<vehicle>`` element each (type, depart time,
+lateral depart position, desired speed), so a route file is fully determined by the
+:class:`DemandSpec`, the network, the seed and the horizon. SUMO's own randomness
+(the Krauss driver imperfection ``sigma`` of human drivers) is governed by SUMO's
+``--seed``, which the runner passes.
+
+Vehicle types (``vType``): one per (kind, size class), ids ``cav_<k>`` and ``hdv_<k>``;
+the co-simulation recognises CAVs by the type-id prefix ``cav``. Vehicle ids are
+``<kind>.<origin>.<n>``, e.g. ``cav.main.17``, ``hdv.ramp.3``, ``cav.ring.0``. The
+desired speed v0 is written as ``speedFactor = v0 / speed limit`` (SUMO's drivers aim
+for v0) and as ``<param key="desiredSpeed">``.
+"""
 
 from __future__ import annotations
 
@@ -7,9 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
-import numpy as np
-
-from cosim.demand.plan import _open_stream, _ring_vehicles, _Vehicle, ring_route_repeat
+from cosim.demand.plan import DemandPlan, _Vehicle, plan_vehicles
 from cosim.demand.spec import (
     ACCEL_MPS2,
     CAV_PREFIX,
@@ -64,19 +75,28 @@ class RouteInfo:
     ring_initial_speed_mps: float | None = None
 
 
+# Vehicle colours in sumo-gui (8-bit RGB), the same as the figures' (cosim/analysis/figures.py):
+# matplotlib's tab:blue for CAVs and tab:orange for HDVs, a colour-blind-safe pair that also
+# differs in lightness (relative luminance 0.17 vs 0.36).
+CAV_RGB = (31, 119, 180)
+HDV_RGB = (255, 127, 14)
+
+
 def vtype_lines(demand: DemandSpec, lanes: bool) -> list[str]:
     """``<vType>`` elements: ``cav_<k>`` and ``hdv_<k>`` for every size class.
 
     ``lanes=False`` (lane-free road) gives SUMO's sublane model SL2015 with
     ``latAlignment="arbitrary"``; ``lanes=True`` (three_lane baseline) gives LC2013.
+    CAV types are drawn in :data:`CAV_RGB` (blue), HDV types in :data:`HDV_RGB` (orange).
     """
     out = []
     # CAVs get a short reaction time ``tau`` so that SUMO's insertion check lets
     # them enter at CAV headways (our controller drives them from the first step).
     for kind, colour, sigma, tau in (
-        (CAV_PREFIX, "0,90,255", 0.0, CAV_TAU_S),
-        (HDV_PREFIX, "200,200,200", HDV_SIGMA, HDV_TAU_S),
+        (CAV_PREFIX, CAV_RGB, 0.0, CAV_TAU_S),
+        (HDV_PREFIX, HDV_RGB, HDV_SIGMA, HDV_TAU_S),
     ):
+        colour = ",".join(str(c) for c in colour)
         for k, (length, width, _p) in enumerate(demand.size_classes):
             lc = (
                 'laneChangeModel="LC2013"'
@@ -121,28 +141,19 @@ def _vehicle_line(v: _Vehicle) -> str:
     )
 
 
-def write_routes(net: RoadNetwork, demand: DemandSpec, seed: int, path: Path | str) -> RouteInfo:
+def write_routes(net: RoadNetwork, demand: DemandSpec, seed: int, path: Path | str,
+                 horizon_s: float = 600.0, plan: DemandPlan | None = None) -> RouteInfo:
     """Write the vTypes, routes and vehicles of ``demand`` on ``net`` to ``path``.
 
     Ring networks get ``ring_density_vpkm`` vehicles placed at t=0 (exact count
     ``round(density * length)``), each on a route that starts on its edge and
-    repeats the loop (see :func:`ring_route_repeat`). Open roads get arrivals
-    on the main road and, on an on-ramp network, on the ramp.
+    repeats the loop often enough for ``horizon_s`` (s). Open roads get arrivals in
+    ``[0, horizon_s)`` on the main road and, on an on-ramp network, on the ramp.
     """
-    rng = np.random.default_rng(seed)
     path = Path(path)
-    repeat = None
-    if net.periodic:
-        vehicles = _ring_vehicles(net, demand, rng)
-        repeat = ring_route_repeat(net, demand.duration_s)
-        process = "ring_initial"
-    else:
-        vehicles = _open_stream(net, demand, rng, "main", demand.inflow_vph, float(net.width_at(0)))
-        if net.ramp_route and demand.ramp_inflow_vph > 0:
-            ramp_w = net.ramp_width_m or net.width_m
-            vehicles += _open_stream(net, demand, rng, "ramp", demand.ramp_inflow_vph, ramp_w)
-        vehicles.sort(key=lambda v: (v.depart, v.vid))
-        process = demand.arrivals
+    if plan is None:
+        plan = plan_vehicles(net, demand, seed, horizon_s)
+    vehicles, process, repeat = plan.vehicles, plan.process, plan.ring_route_repeat
     lines = ['<?xml version="1.0" encoding="UTF-8"?>', f"<!-- cosim demand, seed {seed} -->",
              "<routes>"]
     lines += vtype_lines(demand, lanes=net.n_lanes > 1)

@@ -1,4 +1,8 @@
-"""TODO docstring."""
+"""What traffic a scenario generates: the ``[demand]`` section and the vehicle constants.
+
+Flows in veh/h, densities in veh/km, speeds in m/s, sizes in m. The demand's time
+horizon is the run's duration (``[scenario] duration_s``), passed in by the runner.
+"""
 
 from __future__ import annotations
 
@@ -101,8 +105,6 @@ class DemandSpec:
         ramp_inflow_vph: on-ramp inflow (onramp networks), veh/h.
         ring_density_vpkm: ring only: vehicles per km placed on the ring at t=0.
         desired_speed_mps: (low, high) of the uniform desired-speed distribution.
-        duration_s: demand horizon: departures in [0, duration_s); on the ring,
-            routes are long enough to circle for duration_s at the vType's max speed.
         depart_lateral: ``"random"`` (uniform across the lane, body inside the
             road) or ``"center"``; on multi-lane roads: random lane or middle lane.
         depart_speed: open roads: ``"desired"`` (the vehicle's desired speed) or
@@ -133,7 +135,6 @@ class DemandSpec:
     ramp_inflow_vph: float = 0.0
     ring_density_vpkm: float = 30.0
     desired_speed_mps: tuple[float, float] = (25.0, 35.0)
-    duration_s: float = 600.0
     depart_lateral: str = "random"
     depart_speed: str = "desired"
     ring_initial_speed_mps: float | None = None
@@ -156,11 +157,8 @@ class DemandSpec:
         _finite_nonneg("inflow_vph", self.inflow_vph)
         _finite_nonneg("ramp_inflow_vph", self.ramp_inflow_vph)
         _finite_nonneg("ring_density_vpkm", self.ring_density_vpkm)
-        _finite_nonneg("duration_s", self.duration_s)
         if self.ring_initial_speed_mps is not None:
             _finite_nonneg("ring_initial_speed_mps", self.ring_initial_speed_mps)
-        if self.duration_s <= 0:
-            raise ConfigError(f"demand.duration_s must be > 0 (got {self.duration_s})")
         _finite_nonneg("cav_share", self.cav_share)
         if not 0.0 <= self.cav_share <= 1.0:
             raise ConfigError(f"demand.cav_share must be in [0, 1] (got {self.cav_share})")

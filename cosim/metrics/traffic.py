@@ -60,6 +60,7 @@ class StepState:
     is_cav: np.ndarray  # bool
     edge_right: np.ndarray  # lateral road edges at each vehicle, m
     edge_left: np.ndarray
+    is_static: np.ndarray | None = None  # bool: a stopped obstacle (collisions only)
 
 
 def overlapping_pairs(st: StepState, period: float | None) -> np.ndarray:
@@ -195,6 +196,7 @@ class TrafficRecorder:
         self._acc: IntervalAccumulator | None = None
         self._prev_front: dict = {}
         self._prev_overlaps: set = set()
+        self._prev_sumo: set = set()
         self._boundary_ids: set = set()
         self.worst_excursion_m = 0.0
         self.boundary_vehicle_steps = 0
@@ -223,11 +225,13 @@ class TrafficRecorder:
             start = self.warmup_s if self._acc is None else self._acc.t0 + self.interval_s
             self._acc = IntervalAccumulator(t0=start, crossings=np.zeros(len(self.xs), int))
         acc = self._acc if measuring else None
-        self.vehicle_steps += len(st.s)
+        static = np.zeros(len(st.s), dtype=bool) if st.is_static is None else st.is_static
+        traffic = ~static
+        self.vehicle_steps += int(np.count_nonzero(traffic))
 
         # Edie sums in the zone (each vehicle spends dt in this step).
         z0, z1 = self.zone
-        in_zone = (st.s >= z0) & (st.s < z1)
+        in_zone = (st.s >= z0) & (st.s < z1) & traffic
         if acc is not None:
             acc.tts_s += self.dt * int(np.count_nonzero(in_zone))
             acc.ttd_m += self.dt * float(np.sum(st.v[in_zone]))
@@ -256,7 +260,7 @@ class TrafficRecorder:
         excursion = np.maximum(
             st.edge_right - (st.d - 0.5 * st.width), (st.d + 0.5 * st.width) - st.edge_left
         )
-        out = excursion > 1e-6
+        out = (excursion > 1e-6) & traffic
         if out.any():
             self.boundary_vehicle_steps += int(np.count_nonzero(out))
             self.boundary_vehicle_steps_cav += int(np.count_nonzero(out & st.is_cav))
@@ -281,7 +285,11 @@ class TrafficRecorder:
                     acc.collisions_geom += 1
         self._prev_overlaps = now
         cav_set = {k for k, c in zip(st.ids, st.is_cav, strict=True) if c}
-        for a, b in sumo_collisions:
+        # SUMO lists a pair in every step it overlaps: count only pairs that start to.
+        sumo_now = {tuple(sorted(pair)) for pair in sumo_collisions}
+        new_sumo = sorted(sumo_now - self._prev_sumo)
+        self._prev_sumo = sumo_now
+        for a, b in new_sumo:
             kind = "cav" if (a in cav_set or b in cav_set) else "hdv_only"
             self.collisions_sumo[kind] += 1
             self.collision_log.append({"t_s": t, "source": "sumo", "a": a, "b": b, "kind": kind})
@@ -291,7 +299,9 @@ class TrafficRecorder:
         # Gaps and headways.
         if measuring:
             g_long, g_side, leader = gaps_and_leaders(st, self.period)
-            self._record_ttc(g_long, st, leader)
+            g_long = np.where(traffic, g_long, np.inf)  # an obstacle follows nobody
+            g_side = np.where(traffic, g_side, np.inf)
+            self._record_ttc(g_long, st, leader, traffic)
             finite = np.isfinite(g_long)
             if finite.any():
                 self.min_gap_m = min(self.min_gap_m, float(g_long[finite].min()))
@@ -311,9 +321,10 @@ class TrafficRecorder:
                         acc.min_side_clearance_m, float(g_side[fs].min())
                     )
 
-    def _record_ttc(self, g_long: np.ndarray, st: StepState, leader: np.ndarray) -> None:
+    def _record_ttc(self, g_long: np.ndarray, st: StepState, leader: np.ndarray,
+                    traffic: np.ndarray) -> None:
         """TTC minimum and Minderhoud & Bovy's TET/TIT over one measured step."""
-        self.measured_vehicle_s += self.dt * len(st.s)
+        self.measured_vehicle_s += self.dt * int(np.count_nonzero(traffic))
         ttc = time_to_collision(g_long, st.v, leader)
         if not len(ttc):
             return

@@ -150,6 +150,13 @@ SCENARIOS = {
     "seed000": (seed000_world, 15.0),
     "seed001": (seed001_world, 32.0),
 }
+#: One line per plane scenario (``cosim list``, ``cosim plane --help``).
+DESCRIPTIONS = {
+    "seed000": "Olfati-Saber Algorithm 3 (paper's law): 10 agents pass a circular obstacle "
+               "on a 50 m wide road behind a moving leader, 15 s",
+    "seed001": "Algorithm 2: 50 agents track a moving goal, step 0.01 s; --saturation caps "
+               "the speed (m/s), 32 s",
+}
 
 
 def obstacles_meta(world: PlaneWorld) -> dict:

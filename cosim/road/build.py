@@ -1,4 +1,19 @@
-"""TODO docstring."""
+"""Build SUMO road networks from a :class:`NetworkSpec`: plain-XML sources and netconvert.
+
+:func:`build_network` writes ``.nod.xml`` and ``.edg.xml`` sources, runs ``netconvert``
+and returns the :class:`~cosim.road.frame.RoadNetwork`. Built networks are cached under
+``<cache>/<kind>-<hash>/`` (:func:`default_cache_dir`, a directory you pass, or
+``$COSIM_NETWORK_CACHE``); the hash covers the parameters that matter for the kind,
+the SUMO version and :data:`BUILDER_VERSION`, so a second build with the same inputs
+reuses the file.
+
+Geometry conventions (all lengths in m, speeds in m/s):
+
+* Lane-free roads have ONE wide lane per edge; SUMO's sublane model
+  (``--lateral-resolution``) lets vehicles sit anywhere across it.
+* Every generated edge uses ``spreadType="center"``: the edge's centre line is the
+  road's centre line, and consecutive edges of different widths share it.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,15 @@
-"""TODO docstring."""
+"""The road frame on a SUMO network: ``s`` along the main route, ``d`` across it.
+
+:func:`load_road_network` reads a ``.net.xml`` with sumolib and computes, for the main
+route (and an optional ramp route), the offset ``s`` of every lane and junction lane,
+the lateral offset of every lane's centre and the road's edges along ``s``:
+:class:`RoadNetwork`.
+
+Conventions: ``s`` is measured along lanes as SUMO measures positions (the lane
+``length`` attribute), including the internal junction lanes (``:node_0_0``), so that
+``s = offset(lane) + lanePosition`` is continuous across junctions; ``d`` is positive
+to the left of the road's centre line.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from controllers.observation import RoadProfile
 from cosim.errors import ConfigError, NetworkError
 
 
@@ -86,6 +98,14 @@ class RoadNetwork:
     def d_of(self, lane_or_edge: str, lateral_lane_pos_m: float) -> float:
         """Road-frame ``d`` (m, left positive) from SUMO's lateral position on a lane."""
         return self.lane_d.get(lane_or_edge, 0.0) + float(lateral_lane_pos_m)
+
+    def profile(self) -> RoadProfile:
+        """The main route's lateral edges along ``s`` as a pure-numpy profile (controllers)."""
+        w = np.asarray(self.segment_width, dtype=float)
+        if self.n_lanes > 1:
+            w = w.copy()
+        return RoadProfile(np.asarray(self.segment_s0, dtype=float), -0.5 * w, 0.5 * w,
+                           float(self.length_m), self.periodic)
 
     def width_at(self, s: np.ndarray) -> np.ndarray:
         """Road width (m) at each ``s`` (m); beyond the ends the end segments' widths."""

@@ -1,4 +1,8 @@
-"""TODO docstring."""
+"""The ``[network]`` section: a road from a few parameters, or the user's own ``.net.xml``.
+
+Lengths and widths in m, speeds in m/s. :class:`NetworkSpec` is validated on
+construction; :mod:`cosim.road.build` turns it into a SUMO network.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""TODO docstring."""
+"""Where SUMO's programs are (the eclipse-sumo wheel, ``$SUMO_HOME``, PATH) and their version."""
 
 from __future__ import annotations
 

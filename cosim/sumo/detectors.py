@@ -1,4 +1,8 @@
-"""TODO docstring."""
+"""SUMO's own detectors for a run: E1 induction loops at cross-sections and edge meandata.
+
+Written as an additional file (``-a``); :mod:`cosim.sumo.outputs` reads what they record,
+so our metrics can be checked against SUMO's (``experiments/check_detectors.py``).
+"""
 
 from __future__ import annotations
 

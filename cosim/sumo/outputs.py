@@ -165,19 +165,23 @@ def read_meandata(path: Path | str) -> pd.DataFrame:
     return df
 
 
-def read_run_detectors(meta: dict) -> tuple[pd.DataFrame, pd.DataFrame]:
+def read_run_detectors(meta: dict, run_dir: str | Path | None = None
+                       ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(E1 rows, edgeData rows) of a run, from its ``meta["sumo_detectors"]`` record.
 
-    The E1 frame gets ``s_m``, the main-route position of each loop.
+    File paths in the record are relative to the run's folder ``run_dir`` (absolute
+    paths are used as they are). The E1 frame gets ``s_m``, the main-route position of
+    each loop.
     """
     det = meta.get("sumo_detectors")
     if not det:
         raise ValueError("the run has no SUMO detectors (set [outputs] sumo_detectors = true)")
-    files = sorted(set(det["loop_files"]))
+    base = Path(run_dir) if run_dir is not None else Path(".")
+    files = sorted({str(base / f) for f in det["loop_files"]})
     e1 = read_e1(files)
     pos = dict(zip(det["loop_ids"], det["loop_s_m"], strict=True))
     e1["s_m"] = e1["id"].map(pos)
-    return e1, read_meandata(det["edgedata_file"])
+    return e1, read_meandata(base / det["edgedata_file"])
 
 
 def window(df: pd.DataFrame, t0: float, t1: float, tol: float = 1e-6) -> pd.DataFrame:

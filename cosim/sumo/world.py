@@ -15,16 +15,15 @@ from __future__ import annotations
 
 import contextlib
 import os
-import shutil
 import sys
 import tempfile
-from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
 from cosim.errors import SumoStartError
 from cosim.road.frame import RoadNetwork
+from cosim.sim.world import RoadSnapshot
+from cosim.sumo.binaries import sumo_binary
 
 _VARS = None
 
@@ -43,23 +42,6 @@ def _vars():
             ls.VAR_SPEED_LAT,
         )
     return _VARS
-
-
-def sumo_binary(gui: bool = False) -> str:
-    """Path of the ``sumo`` (or ``sumo-gui``) binary shipped by the eclipse-sumo package."""
-    name = "sumo-gui" if gui else "sumo"
-    try:
-        import sumo
-
-        cand = Path(sumo.SUMO_HOME) / "bin" / name
-        if cand.exists():
-            return str(cand)
-    except ImportError:
-        pass
-    found = shutil.which(name)
-    if found:
-        return found
-    raise SumoStartError(f"{name} binary not found (install the eclipse-sumo package)")
 
 
 _CAPTURED: list[str] = []
@@ -93,49 +75,44 @@ def _captured_stderr():
             )
 
 
-@dataclass
-class VehicleArrays:
-    """Bulk state of the vehicles on the road this step (M of them)."""
-
-    ids: list
-    lane: list
-    s_front: np.ndarray
-    s: np.ndarray
-    d: np.ndarray
-    v: np.ndarray
-    v_lat: np.ndarray
-    length: np.ndarray
-    width: np.ndarray
-    is_cav: np.ndarray
-    on_main: np.ndarray
-
-
 class SumoWorld:
-    """A running SUMO simulation seen in the road frame of ``net``.
+    """A running SUMO simulation seen in the road frame of ``net`` (a :class:`World`).
 
     Args:
         net: the road network (road frame).
         sumo_args: extra SUMO command-line arguments (routes, options).
+        dt: step, s (SUMO's ``--step-length``).
+        desired: desired speed (m/s) per vehicle id (from the demand plan).
         cav_prefix: vType id prefix that marks CAVs.
         gui: run ``sumo-gui`` through TraCI instead of libsumo.
     """
 
-    def __init__(self, net: RoadNetwork, sumo_args: list[str], cav_prefix: str = "cav",
+    def __init__(self, net: RoadNetwork, sumo_args: list[str], dt: float = 0.1,
+                 desired: dict | None = None, cav_prefix: str = "cav",
                  gui: bool = False) -> None:
         self.net = net
+        self.dt = float(dt)
+        self.road = net.profile()
+        self.speed_limit_mps = float(net.speed_limit_mps)
+        self.desired = dict(desired or {})
         self.cav_prefix = cav_prefix
         self.gui = gui
-        self.cmd = [sumo_binary(gui), "-n", str(net.net_file), *sumo_args]
+        binary = str(sumo_binary("sumo-gui" if gui else "sumo"))
+        self.cmd = [binary, "-n", str(net.net_file), *sumo_args]
         self.ts = None
         self.types: dict[str, str] = {}
-        self._static: dict[str, tuple[float, float, bool]] = {}  # length, width, is_cav
+        # length, width, is_cav, desired speed
+        self._static: dict[str, tuple[float, float, bool, float]] = {}
         self._lane_info: dict[str, tuple[float, float, bool]] = {}  # offset, lane d, on main
+        self._lane_of: dict[str, str] = {}
         self.departed_now: list[str] = []
         self.arrived_now: list[str] = []
         self.controlled: set[str] = set()
         self.v_lat_state: dict[str, float] = {}
         self.period = net.length_m if net.periodic else None
         self.main_lanes = {k for k in net.lane_offsets if self._is_main(k)}
+        self._obstacle = None
+        self.obstacle_id: str | None = None
 
     def _is_main(self, lane: str) -> bool:
         edge = lane.rsplit("_", 1)[0] if not lane.startswith(":") else lane
@@ -144,18 +121,17 @@ class SumoWorld:
     # ------------------------------------------------------------------------------
     def start(self) -> None:
         """Start SUMO; raise SumoStartError with SUMO's message if it fails."""
+        if self.gui:  # display checked first; sumo-gui errors come back as one line
+            from cosim.sumo.gui import start_gui
+
+            self.ts = start_gui(self.cmd)
+            return
         try:
-            if self.gui:
-                import traci
+            import libsumo
 
-                traci.start(self.cmd)
-                self.ts = traci
-            else:
-                import libsumo
-
-                with _captured_stderr():
-                    libsumo.start(self.cmd)
-                self.ts = libsumo
+            with _captured_stderr():
+                libsumo.start(self.cmd)
+            self.ts = libsumo
         except Exception as exc:  # libsumo raises its own exception types
             lines = [x.strip() for x in str(exc).splitlines() if x.strip()]
             errors = [x for x in captured_lines() if x.startswith("Error:")]
@@ -177,7 +153,7 @@ class SumoWorld:
         return float(self.ts.simulation.getTime())
 
     def step(self) -> None:
-        """Advance SUMO one step and register departures and arrivals."""
+        """Advance SUMO one step, register departures and arrivals, hold the obstacle."""
         ts = self.ts
         ts.simulationStep()
         self.departed_now = list(ts.simulation.getDepartedIDList())
@@ -188,13 +164,15 @@ class SumoWorld:
             tid = veh.getTypeID(vid)
             self.types[vid] = tid
             self._static[vid] = (
-                veh.getLength(vid), veh.getWidth(vid), tid.startswith(self.cav_prefix)
+                veh.getLength(vid), veh.getWidth(vid), tid.startswith(self.cav_prefix),
+                self.desired.get(vid, np.nan),
             )
         for vid in self.arrived_now:
             self.types.pop(vid, None)
             self._static.pop(vid, None)
             self.controlled.discard(vid)
             self.v_lat_state.pop(vid, None)
+        self._hold_obstacle()
 
     def _lane(self, lane: str) -> tuple[float, float, bool]:
         info = self._lane_info.get(lane)
@@ -204,7 +182,7 @@ class SumoWorld:
             self._lane_info[lane] = info
         return info
 
-    def read(self) -> VehicleArrays:
+    def observe(self) -> RoadSnapshot:
         """All vehicles on the network, in the road frame (centre positions)."""
         res = self.ts.vehicle.getAllSubscriptionResults()
         v_lane, v_pos, v_lat, v_speed, v_slat = _vars()
@@ -220,10 +198,11 @@ class SumoWorld:
             ln = r[v_lane]
             lane[k] = ln
             off, ld, main = lane_info(ln)
-            length, width, cav = static[vid]
+            length, width, cav, desired = static[vid]
             rows[k] = (r[v_pos], r[v_lat], r[v_speed], vlat_state.get(vid, r[v_slat]),
-                       length, width, off, ld, main, cav)
-        arr = np.array(rows, dtype=float).reshape(n, 10)
+                       length, width, off, ld, main, cav, desired)
+        self._lane_of = dict(zip(ids, lane, strict=True))
+        arr = np.array(rows, dtype=float).reshape(n, 11)
         s_front = arr[:, 6] + arr[:, 0]
         if self.period is not None:
             s_front = np.mod(s_front, self.period)
@@ -231,21 +210,30 @@ class SumoWorld:
         if self.period is not None:
             s = np.mod(s, self.period)
         on_main = (arr[:, 8] > 0) & ~np.isnan(s)
-        return VehicleArrays(ids, lane, s_front, s, arr[:, 1] + arr[:, 7], arr[:, 2], arr[:, 3],
-                             arr[:, 4], arr[:, 5], arr[:, 9] > 0, on_main)
+        is_static = np.zeros(n, dtype=bool)
+        if self.obstacle_id is not None and self.obstacle_id in self._lane_of:
+            is_static[ids.index(self.obstacle_id)] = True
+        return RoadSnapshot(ids, s, s_front, arr[:, 1] + arr[:, 7], arr[:, 2], arr[:, 3],
+                            arr[:, 4], arr[:, 5], arr[:, 9] > 0, on_main, is_static,
+                            arr[:, 10])
 
-    def take_over(self, vid: str) -> None:
-        """Hand a CAV to our controller: no SUMO speed checks, no SUMO lane changes."""
-        self.ts.vehicle.setSpeedMode(vid, 0)
-        self.ts.vehicle.setLaneChangeMode(vid, 0)
-        self.controlled.add(vid)
-        self.v_lat_state.setdefault(vid, 0.0)
+    def take_over(self, ids: list) -> None:
+        """Hand CAVs to our controller: no SUMO speed checks, no SUMO lane changes."""
+        veh = self.ts.vehicle
+        for vid in ids:
+            if vid in self.controlled:
+                continue
+            veh.setSpeedMode(vid, 0)
+            veh.setLaneChangeMode(vid, 0)
+            self.controlled.add(vid)
+            self.v_lat_state.setdefault(vid, 0.0)
 
-    def apply(self, ids: list, v_next: np.ndarray, d_next: np.ndarray, lanes: list,
+    def apply(self, ids: list, v_next: np.ndarray, d_next: np.ndarray,
               v_lat_next: np.ndarray) -> None:
         """Command next speeds (m/s) and lateral positions (road frame, m) of CAVs."""
         veh = self.ts.vehicle
         lane_d = self.net.lane_d
+        lanes = [self._lane_of[i] for i in ids]
         for vid, v, d, lane, vl in zip(ids, v_next, d_next, lanes, v_lat_next, strict=True):
             veh.setSpeed(vid, float(v))
             veh.setLateralLanePosition(vid, float(d - lane_d.get(lane, 0.0)))
@@ -256,7 +244,12 @@ class SumoWorld:
         return [(c.collider, c.victim) for c in self.ts.simulation.getCollisions()]
 
     def teleports(self) -> int:
+        """Vehicles SUMO teleported so far."""
         return int(self.ts.simulation.getStartingTeleportNumber())
+
+    def pending(self) -> int:
+        """Vehicles due to depart that SUMO could not insert yet."""
+        return len(self.ts.simulation.getPendingVehicles())
 
     def add_obstacle(self, s_m: float, d_m: float, length_m: float, width_m: float) -> str:
         """Place a stopped vehicle (id "obstacle") with its centre at (s, d); returns its id."""
@@ -274,11 +267,12 @@ class SumoWorld:
         ts.vehicle.setLaneChangeMode("obstacle", 0)
         ts.vehicle.setSpeed("obstacle", 0.0)
         self._obstacle = (edge, pos, d_m)
+        self.obstacle_id = "obstacle"
         return "obstacle"
 
-    def hold_obstacle(self) -> None:
-        """Keep the obstacle vehicle in place (call every step after it departed)."""
-        if getattr(self, "_obstacle", None) is None:
+    def _hold_obstacle(self) -> None:
+        """Keep the obstacle vehicle in place (every step after it departed)."""
+        if self._obstacle is None:
             return
         if "obstacle" in self.types:
             edge, pos, d_m = self._obstacle

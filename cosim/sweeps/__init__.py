@@ -1,1 +1,60 @@
-"""TODO."""
+"""Parameter sweeps: a grid of scenarios run in parallel, resumable, one tidy results table.
+
+Modules, by job:
+
+* :mod:`cosim.sweeps.plan`: the sweep file (TOML) parsed and validated into a
+  :class:`SweepPlan` of grid points, each with its stable ``run_id``;
+* :mod:`cosim.sweeps.execute`: running the plan: the local process pool or Dask, one
+  run's execution in its own process, markers and locks (no run twice at once, workers
+  end when the sweep dies), :func:`run_sweep`;
+* :mod:`cosim.sweeps.results`: row files and ``results.csv`` on disk;
+* :mod:`cosim.sweeps.cli`: ``cosim sweep`` (argparse parser and command).
+
+Python use::
+
+    from cosim.sweeps import load_sweep, run_sweep
+    outcome = run_sweep(load_sweep("open_road_capacity", smoke=True), "outputs/s")
+"""
+
+from cosim.sweeps.cli import add_sweep_parser, cmd_sweep, main
+from cosim.sweeps.execute import (
+    CRASH_ENV,
+    TEST_LOG_ENV,
+    RunTask,
+    SweepOutcome,
+    execute_task,
+    run_sweep,
+)
+from cosim.sweeps.plan import (
+    GridPoint,
+    SweepPlan,
+    default_out_dir,
+    load_sweep,
+    resolve_sweep_file,
+    run_id,
+    sweep_from_dict,
+)
+from cosim.sweeps.results import read_row, results_frame, write_results, write_row
+
+__all__ = [
+    "CRASH_ENV",
+    "TEST_LOG_ENV",
+    "GridPoint",
+    "RunTask",
+    "SweepOutcome",
+    "SweepPlan",
+    "add_sweep_parser",
+    "cmd_sweep",
+    "default_out_dir",
+    "execute_task",
+    "load_sweep",
+    "main",
+    "read_row",
+    "resolve_sweep_file",
+    "results_frame",
+    "run_id",
+    "run_sweep",
+    "sweep_from_dict",
+    "write_results",
+    "write_row",
+]

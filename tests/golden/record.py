@@ -25,13 +25,13 @@ CASES: dict[str, dict] = {
         "scenario": {"name": "g_flocking", "seed": 3, **SHORT},
         "network": {"kind": "straight", "length_m": 600.0},
         "demand": {"inflow_vph": 3000.0, "cav_share": 0.6},
-        "controller": {"kind": "flocking"},
+        "controller": {"kind": "flocking_timegap"},
     },
     "flocking_ring": {
         "scenario": {"name": "g_ring", "seed": 5, **SHORT},
         "network": {"kind": "ring", "circumference_m": 500.0},
         "demand": {"ring_density_vpkm": 80.0, "cav_share": 1.0},
-        "controller": {"kind": "flocking"},
+        "controller": {"kind": "flocking_timegap"},
     },
     "boundary_points_obstacle": {
         "scenario": {"name": "g_bp", "seed": 2, **SHORT},
@@ -44,7 +44,7 @@ CASES: dict[str, dict] = {
         "scenario": {"name": "g_comm", "seed": 4, **SHORT},
         "network": {"kind": "straight", "length_m": 600.0},
         "demand": {"inflow_vph": 3000.0, "cav_share": 0.8},
-        "controller": {"kind": "flocking", "comm": {
+        "controller": {"kind": "flocking_timegap", "comm": {
             "r_comm_m": 150.0, "delay_min_s": 0.05, "delay_max_s": 0.3, "loss_prob": 0.1,
             "period_s": 0.1, "expiry_s": 1.0, "mode": "asynchronous", "seed": 1}},
     },

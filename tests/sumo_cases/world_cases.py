@@ -71,8 +71,7 @@ def _straight_world(vehicles, length_m: float = 300.0) -> SumoWorld:
     world = SumoWorld(net, ["-r", str(_routes(vehicles)), *SUMO_OPTS])
     world.start()
     world.step()
-    for vid in world.read().ids:
-        world.take_over(vid)
+    world.take_over(list(world.observe().ids))
     return world
 
 
@@ -93,7 +92,6 @@ def _command(world: SumoWorld, va, speed: dict, lat: dict) -> None:
         ids,
         np.array([speed[i] for i in ids]),
         np.array([lat[i] for i in ids]),
-        list(va.lane),
         np.zeros(len(ids)),
     )
 
@@ -102,16 +100,16 @@ def _command(world: SumoWorld, va, speed: dict, lat: dict) -> None:
 def case_kinematics() -> dict:
     """One CAV commanded with accelerations beyond its vType limits (accel 2.6, decel 4.5)."""
     world = _straight_world([("cav.0", 20.0, 10.0, 0.0)])
-    va = world.read()
+    va = world.observe()
     x0, v = float(va.s[0]), float(va.v[0])
     accel = [4.0] * 20 + [-7.0] * 10 + [0.5] * 20
     x_euler = x0
     s_err = v_err = 0.0
     for a in accel:
         v_new = v + a * DT
-        world.apply(["cav.0"], np.array([v_new]), np.array([0.0]), list(va.lane), np.zeros(1))
+        world.apply(["cav.0"], np.array([v_new]), np.array([0.0]), np.zeros(1))
         world.step()
-        va = world.read()
+        va = world.observe()
         x_euler += v_new * DT
         v = v_new
         s_err = max(s_err, abs(float(va.s[0]) - x_euler))
@@ -129,13 +127,13 @@ def case_lateral() -> dict:
     world = _straight_world([("cav.0", 20.0, 15.0, 0.0)])
     rng = np.random.default_rng(0)
     targets = rng.uniform(-4.0, 4.0, 60)
-    va = world.read()
+    va = world.observe()
     errs, jumps = [], []
     d_prev = float(va.d[0])
     for d in targets:
         _command(world, va, {"cav.0": 15.0}, {"cav.0": float(d)})
         world.step()
-        va = world.read()
+        va = world.observe()
         raw = world.ts.vehicle.getLateralLanePosition("cav.0")
         errs.append(max(abs(float(va.d[0]) - d), abs(raw - d)))
         jumps.append(abs(d - d_prev))
@@ -151,12 +149,12 @@ def case_boundary() -> dict:
     net = world.net
     rec = TrafficRecorder(DT, (0.0, net.length_m), (), 10.0, 0.0)
     plan = [0.0] * 5 + [4.5] * 20 + [-6.0] * 10 + [0.0] * 5
-    va = world.read()
+    va = world.observe()
     d_read, n_out_expected = [], 0
     for d in plan:
         _command(world, va, {"cav.0": 15.0}, {"cav.0": d})
         world.step()
-        va = world.read()
+        va = world.observe()
         st = _step_state(world, va)
         rec.record(st, world.collisions())
         d_read.append(float(va.d[0]))
@@ -183,14 +181,14 @@ def case_collision() -> dict:
     rec = TrafficRecorder(DT, (0.0, world.net.length_m), (), 10.0, 0.0)
     speed = {"cav.lead": 5.0, "cav.fast": 20.0}
     lat = {"cav.lead": 0.0, "cav.fast": 0.5}
-    va = world.read()
+    va = world.observe()
     t0 = world.time
     ds0 = float(va.s[va.ids.index("cav.lead")] - va.s[va.ids.index("cav.fast")])
     sumo_steps, geom_steps, sumo_pairs = [], [], set()
     for _ in range(40):
         _command(world, va, speed, lat)
         world.step()
-        va = world.read()
+        va = world.observe()
         st = _step_state(world, va)
         coll = world.collisions()
         rec.record(st, coll)
@@ -217,22 +215,20 @@ def case_collision() -> dict:
 def case_ring() -> dict:
     """Three CAVs circling a 300 m ring at 20 m/s, all at d = 0 (one behind the other)."""
     net = build_network(NetworkSpec(kind="ring", circumference_m=300.0, width_m=10.2))
-    demand = DemandSpec(ring_density_vpkm=10.0, cav_share=1.0, duration_s=60.0,
-                        desired_speed_mps=(20.0, 20.0))
-    info = write_routes(net, demand, 1, WORKDIR / "ring.rou.xml")
+    demand = DemandSpec(ring_density_vpkm=10.0, cav_share=1.0, desired_speed_mps=(20.0, 20.0))
+    info = write_routes(net, demand, 1, WORKDIR / "ring.rou.xml", horizon_s=60.0)
     world = SumoWorld(net, ["-r", str(info.path), *SUMO_OPTS])
     world.start()
     world.step()
-    va = world.read()
-    for vid in va.ids:
-        world.take_over(vid)
+    va = world.observe()
+    world.take_over(list(va.ids))
     v = 20.0
     ids = list(va.ids)
     speed = dict.fromkeys(ids, v)
     lat = dict.fromkeys(ids, 0.0)
     _command(world, va, speed, lat)  # move everybody to d = 0
     world.step()
-    va = world.read()
+    va = world.observe()
     order = [va.ids.index(i) for i in ids]
     s_start = va.s[order].copy()
     s_prev = s_start.copy()
@@ -244,7 +240,7 @@ def case_ring() -> dict:
     for _ in range(n_steps):
         _command(world, va, speed, lat)
         world.step()
-        va = world.read()
+        va = world.observe()
         order = [va.ids.index(i) for i in ids]
         s_now = va.s[order]
         s_min, s_max = min(s_min, float(s_now.min())), max(s_max, float(s_now.max()))

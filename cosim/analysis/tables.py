@@ -1,14 +1,14 @@
-"""Analyse a sweep's results: fundamental diagrams, capacity, safety, boundary, flock tables.
+"""A sweep's results as tables: fundamental diagrams, capacity, safety, boundary, flock.
 
 Input: a sweep output directory (``results.csv``, ``sweep.json``, ``runs/<run_id>/``; see
-:mod:`cosim.sweeps.sweep`). Only ``ok`` runs enter the statistics; failed runs are listed.
+:mod:`cosim.sweeps.results`). Only ``ok`` runs enter the statistics; failed runs are listed.
 
 A **series** is one curve of the fundamental diagram: a CAV share and a controller
 (``demand.cav_share``, ``controller.kind``), plus the variant and any other swept
 parameter except the demand level and the seed. The **demand level** is the swept
 ``demand.inflow_vph`` (open roads, veh/h) or ``demand.ring_density_vpkm`` (rings, veh/km).
 
-Tables (CSV and Markdown, in ``RESULTS_DIR/analysis/``):
+Tables (each a DataFrame; :mod:`cosim.analysis.report` writes them as CSV and Markdown):
 
 * ``fd_runs``: one point per run: Edie flow (veh/h), density (veh/km), space-mean speed
   (m/s) over the measurement period (the run's summary row);
@@ -26,13 +26,10 @@ Tables (CSV and Markdown, in ``RESULTS_DIR/analysis/``):
 * ``flock``: flock metrics (minimum CAV distance, velocity alignment, connectivity) and
   controller clip rates;
 * ``failed``: failed runs and their reasons.
-
-``report.md`` collects them; figures go to ``analysis/figures/`` (:mod:`cosim.analysis.figures`).
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 from collections.abc import Sequence
@@ -43,7 +40,6 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # numpy and pandas are imported where used: `cosim --help` stays fast
     import pandas as pd
 
-from cosim.cli.errors import run_command
 from cosim.errors import ConfigError
 
 DEMAND_COLUMNS = ("demand.inflow_vph", "demand.ring_density_vpkm")
@@ -386,241 +382,3 @@ def failures_table(res: SweepResults) -> pd.DataFrame:
     return res.failed[list(dict.fromkeys(cols))].reset_index(drop=True)
 
 
-# --------------------------------------------------------------------------------------
-# Output
-# --------------------------------------------------------------------------------------
-
-
-def _md_cell(v) -> str:
-    import numpy as np
-
-    if v is None or (isinstance(v, float) and math.isnan(v)):
-        return ""
-    if isinstance(v, bool | np.bool_):
-        return "yes" if v else "no"
-    if isinstance(v, float | np.floating):
-        if math.isinf(v):
-            return "inf" if v > 0 else "-inf"
-        if float(v).is_integer() and abs(v) < 1e15:
-            return f"{int(v)}"
-        if abs(v) >= 1000:
-            return f"{v:.0f}"
-        return f"{v:.4g}"
-    return str(v).replace("|", "\\|").replace("\n", " ")
-
-
-def markdown_table(df: pd.DataFrame) -> str:
-    """A GitHub-flavoured Markdown table (numbers to 4 significant digits)."""
-    if df.empty:
-        return "(no rows)\n"
-    header = "| " + " | ".join(str(c) for c in df.columns) + " |"
-    sep = "|" + "|".join("---" for _ in df.columns) + "|"
-    body = ["| " + " | ".join(_md_cell(v) for v in row) + " |" for row in df.itertuples(False)]
-    return "\n".join([header, sep, *body]) + "\n"
-
-
-@dataclass
-class Analysis:
-    """Tables by name and the files written."""
-    tables: dict[str, pd.DataFrame]
-    files: list[Path]
-    out_dir: Path
-
-
-TABLE_TITLES = {
-    "capacity": "Capacity (maximum sustained flow)",
-    "fd_summary": "Fundamental diagram (mean over seeds)",
-    "safety": "Safety",
-    "boundary": "Boundary violations",
-    "flock": "Flock metrics",
-    "failed": "Failed runs",
-}
-
-
-def analyse(
-    results_dir: str | Path,
-    out_dir: str | Path | None = None,
-    figures: bool = True,
-    confidence: float = 0.95,
-    runs: Sequence[str] | None = None,
-    max_run_figures: int = 2,
-    times: Sequence[float] | None = None,
-) -> Analysis:
-    """Compute every table, write CSV + Markdown + report.md (and figures) to ``out_dir``.
-
-    Args:
-        results_dir: the sweep output directory.
-        out_dir: default ``results_dir/analysis``.
-        figures: also write PNG figures (fundamental diagram, capacity, and per run a
-            time-space diagram and a top view when it has trajectories.csv).
-        confidence: level of the t-based confidence intervals.
-        runs: run ids to draw run figures for (default: the first ``max_run_figures``
-            ok runs that have trajectories).
-        times: instants of the top views, s (default: 3 spread over the run).
-    """
-    if not 0 < confidence < 1:
-        raise ConfigError(f"confidence must be in (0, 1), got {confidence}")
-    res = load_results(results_dir)
-    out = Path(out_dir) if out_dir else res.root / "analysis"
-    out.mkdir(parents=True, exist_ok=True)
-    tables = {
-        "fd_runs": fd_runs(res),
-        "fd_intervals": fd_intervals(res),
-        "fd_summary": fd_summary(res, confidence),
-        "capacity": capacity_table(res, confidence),
-        "safety": safety_table(res),
-        "boundary": boundary_table(res),
-        "flock": flock_table(res),
-        "failed": failures_table(res),
-    }
-    files: list[Path] = []
-    for name, df in tables.items():
-        p = out / f"{name}.csv"
-        df.to_csv(p, index=False)
-        files.append(p)
-        if name in TABLE_TITLES:
-            p = out / f"{name}.md"
-            p.write_text(f"## {TABLE_TITLES[name]}\n\n" + markdown_table(df))
-            files.append(p)
-
-    fig_files: list[Path] = []
-    if figures:
-        fig_files = _figures(res, tables, out / "figures", runs, max_run_figures, times)
-        files += fig_files
-    report = out / "report.md"
-    report.write_text(_report(res, tables, confidence, fig_files, out))
-    files.append(report)
-    return Analysis(tables, files, out)
-
-
-def _figures(res, tables, fig_dir: Path, runs, max_run_figures, times) -> list[Path]:
-    from . import figures as fg
-
-    fig_dir.mkdir(parents=True, exist_ok=True)
-    made = []
-    if not tables["fd_runs"].empty:
-        made.append(fg.plot_fundamental_diagram(
-            tables["fd_runs"], fig_dir / "fundamental_diagram.png", res.series_cols,
-            demand_col=res.demand_col, intervals=tables["fd_intervals"],
-            title=res.plan.get("name"),
-        ))
-    if not tables["capacity"].empty and "demand.cav_share" in tables["capacity"]:
-        made.append(fg.plot_capacity(tables["capacity"], fig_dir / "capacity.png",
-                                     res.series_cols, title=res.plan.get("name")))
-    if runs is None:
-        runs = [r for r in res.ok["run_id"]
-                if (res.run_dir(r) / "trajectories.csv").is_file()][:max_run_figures]
-    for rid in runs:
-        rdir = res.run_dir(rid)
-        if not (rdir / "trajectories.csv").is_file():
-            raise ConfigError(f"run {rid}: no trajectories.csv in {rdir} "
-                              "(set [outputs] trajectories = true)")
-        made += fg.plot_run(rdir, fig_dir, times=times, prefix=f"{rid}_")
-    return made
-
-
-def _report(res: SweepResults, tables, confidence, fig_files, out: Path) -> str:
-    plan = res.plan
-    n_ok, n_all = len(res.ok), len(res.table)
-    lines = [f"# Sweep analysis: {plan.get('name', res.root.name)}", ""]
-    if plan.get("description"):
-        lines += [plan["description"], ""]
-    lines += [
-        f"- runs: {n_all} in results.csv, {n_ok} ok, {n_all - n_ok} failed"
-        + (f" (grid: {plan['n_points']} points)" if "n_points" in plan else ""),
-        f"- series (one curve each): {', '.join(res.series_cols) or '-'}",
-        f"- demand level: {res.demand_col or '-'}",
-        f"- confidence intervals: t-based, {confidence:.0%}, across seeds",
-    ]
-    for col in ("cosim_version", "sumo_version"):
-        if col in res.table:
-            vals = ", ".join(str(v) for v in res.table[col].dropna().unique())
-            lines.append(f"- {col.replace('_', ' ')}: {vals}")
-    lines.append("")
-    for name in ("capacity", "fd_summary", "safety", "boundary", "flock", "failed"):
-        if name == "failed" and tables[name].empty:
-            continue
-        lines += [f"## {TABLE_TITLES[name]}", "", markdown_table(tables[name])]
-    if fig_files:
-        lines += ["## Figures", ""]
-        lines += [f"![{p.stem}]({p.relative_to(out)})" for p in fig_files]
-        lines.append("")
-    return "\n".join(lines)
-
-
-# --------------------------------------------------------------------------------------
-# Command line
-# --------------------------------------------------------------------------------------
-
-
-def _add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("results_dir",
-                   help="sweep output folder (with results.csv), or one run's folder")
-    p.add_argument("--out", help="where to write tables and figures (default RESULTS_DIR/analysis)")
-    p.add_argument("--no-figures", action="store_true", help="tables only")
-    p.add_argument("--run", action="append", metavar="RUN_ID",
-                   help="draw the time-space diagram and top view of this run (repeatable)")
-    p.add_argument("--times", type=float, nargs="+", metavar="T",
-                   help="top views at these times, s (default: 3 spread over the run)")
-    p.add_argument("--confidence", type=float, default=0.95, help="CI level (default 0.95)")
-    p.add_argument("--animate", action="store_true",
-                   help="one run's folder: also an animated top view, top_view.gif")
-    p.add_argument("--t-range", type=float, nargs=2, metavar=("T0", "T1"),
-                   help="time span of the animation, s (default: the last 30 s)")
-    p.set_defaults(func=cmd_analyse)
-
-
-def add_analyse_parser(subparsers) -> argparse.ArgumentParser:
-    """Register ``cosim analyse`` on an argparse subparsers object; returns the subparser."""
-    p = subparsers.add_parser(
-        "analyse", help="tables and figures from a sweep's results (or one run's outputs)",
-        description="Fundamental diagrams, capacity, safety, boundary and flock tables "
-                    "(CSV + Markdown) and PNG figures from a sweep output folder.",
-    )
-    _add_arguments(p)
-    return p
-
-
-def cmd_analyse(ns: argparse.Namespace) -> int:
-    root = Path(ns.results_dir)
-    if not root.exists():
-        raise ConfigError(f"no such folder: {root}")
-    if root.is_dir() and not (root / "results.csv").is_file() and (root / "summary.csv").is_file():
-        from cosim.analysis.figures import plot_run
-
-        out = Path(ns.out) if ns.out else root / "analysis"
-        if not (root / "trajectories.csv").is_file():
-            raise ConfigError(f"{root}: no trajectories.csv to draw "
-                              "(run with [outputs] trajectories = true)")
-        t_range = tuple(ns.t_range) if ns.t_range else None
-        if t_range is not None and not t_range[0] < t_range[1]:
-            raise ConfigError(f"--t-range must be increasing (got {t_range[0]:g} {t_range[1]:g})")
-        for p in plot_run(root, out, times=ns.times, animate=ns.animate, t_range=t_range):
-            print(f"figure: {p}")
-        return 0
-    a = analyse(root, ns.out, figures=not ns.no_figures, confidence=ns.confidence,
-                runs=ns.run, times=ns.times)
-    cap = a.tables["capacity"]
-    if not cap.empty:
-        cols = [c for c in (*load_results(root).series_cols, "capacity_vph",
-                            "capacity_ci_low_vph", "capacity_ci_high_vph", "n_seeds",
-                            "at_grid_edge") if c in cap]
-        shown = cap[cols].copy()
-        for c in ("capacity_vph", "capacity_ci_low_vph", "capacity_ci_high_vph"):
-            if c in shown:
-                shown[c] = shown[c].round().astype("Int64")
-        print("capacity (max over demand levels of the mean flow, veh/h):")
-        print(shown.to_string(index=False))
-    n_failed = len(a.tables["failed"])
-    if n_failed:
-        print(f"{n_failed} failed runs are listed in {a.out_dir / 'failed.csv'}")
-    print(f"tables and figures written to {a.out_dir}/ (report.md)")
-    return 0
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``cosim analyse`` without the rest of the CLI: ``main(["RESULTS_DIR", ...])``."""
-    ap = argparse.ArgumentParser(prog="cosim analyse", description=__doc__.splitlines()[0])
-    _add_arguments(ap)
-    ns = ap.parse_args(argv)
-    return run_command(ns.func, ns)

@@ -1,0 +1,243 @@
+"""The simulation loop: one step in named phases, with hooks where recorders and timers attach.
+
+Each step runs these phases in order (:data:`PHASES`):
+
+``advance``    the world moves one step (SUMO's ``simulationStep``, or the road world's);
+``observe``    every vehicle in the road frame (:class:`~cosim.sim.world.RoadSnapshot`);
+               new CAVs on the main route are taken over;
+``reference``  the CAVs' observation: desired speeds, the road edges over the next
+               ``EDGE_LOOKAHEAD_S`` seconds of travel, the vehicles they sense;
+``control``    the law: ``u = law.compute(obs)``, (N, 2) m/s^2;
+``constrain``  the actuator box and jerk limit (each counts its clips);
+``safety``     the safety layer (a backstop: it counts every intervention);
+``integrate``  next speed ``v + u_long dt`` (>= 0, <= the speed limit) and lateral
+               position ``d + v_lat' dt`` (semi-implicit Euler, as SUMO moves vehicles);
+``apply``      the world applies them;
+``record``     recorders read the state after the step (the snapshot of ``observe``).
+
+Hooks: ``loop.hooks.add(phase, fn, when="after")`` calls ``fn(step)`` with the
+:class:`StepData` before or after a phase; :class:`PhaseTimer` uses them to split the
+cost of a run by phase (benchmarks/bench_cosim.py). With ``law = None`` (SUMO drives
+the CAVs) the phases from ``reference`` to ``apply`` are skipped.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from controllers import protocol
+from controllers.constraints import ActuatorLimits, Layer
+from controllers.observation import Observation
+from controllers.safety import RoadState, SafetyLayer
+from cosim.sim.world import RoadSnapshot, World
+
+PHASES = ("advance", "observe", "reference", "control", "constrain", "safety", "integrate",
+          "apply", "record")
+
+#: Seconds of travel over which the road edges ahead bound a CAV's lateral position.
+EDGE_LOOKAHEAD_S = 4.0
+
+
+@dataclass
+class StepData:
+    """What one step computed so far (filled phase by phase).
+
+    Attributes:
+        k: step number (0 is the first step); t: time after the step, s.
+        state: all vehicles after the step.
+        cav_rows: (N,) rows of the controlled CAVs in ``state``.
+        obs: the CAVs' observation.
+        u_law: (N, 2) the law's command, m/s^2; u: after constraints and safety.
+        v_next, d_next, v_lat_next: (N,) the commands applied, m/s, m, m/s.
+    """
+
+    k: int = 0
+    t: float = 0.0
+    state: RoadSnapshot | None = None
+    cav_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    obs: Observation | None = None
+    u_law: np.ndarray | None = None
+    u: np.ndarray | None = None
+    v_next: np.ndarray | None = None
+    d_next: np.ndarray | None = None
+    v_lat_next: np.ndarray | None = None
+
+
+class Hooks:
+    """Callbacks around the phases: ``add(phase, fn, when)`` with ``when`` "before"/"after"."""
+
+    def __init__(self) -> None:
+        self.before: dict[str, list[Callable[[StepData], Any]]] = defaultdict(list)
+        self.after: dict[str, list[Callable[[StepData], Any]]] = defaultdict(list)
+
+    def add(self, phase: str, fn: Callable[[StepData], Any], when: str = "after") -> None:
+        if phase not in PHASES:
+            raise ValueError(f"unknown phase {phase!r} (phases: {', '.join(PHASES)})")
+        if when not in ("before", "after"):
+            raise ValueError(f"when must be 'before' or 'after', got {when!r}")
+        (self.before if when == "before" else self.after)[phase].append(fn)
+
+
+class PhaseTimer:
+    """CPU and wall time per phase, attached through the loop's hooks.
+
+    ``cpu_s[phase]`` and ``wall_s[phase]`` accumulate ``time.process_time`` and
+    ``time.perf_counter`` differences, s.
+    """
+
+    def __init__(self, hooks: Hooks) -> None:
+        self.cpu_s: dict[str, float] = defaultdict(float)
+        self.wall_s: dict[str, float] = defaultdict(float)
+        self._t0: dict[str, tuple[float, float]] = {}
+        for phase in PHASES:
+            hooks.add(phase, self._start(phase), "before")
+            hooks.add(phase, self._stop(phase), "after")
+
+    def _start(self, phase):
+        def fn(_step):
+            self._t0[phase] = (time.process_time(), time.perf_counter())
+        return fn
+
+    def _stop(self, phase):
+        def fn(_step):
+            c0, w0 = self._t0.pop(phase)
+            self.cpu_s[phase] += time.process_time() - c0
+            self.wall_s[phase] += time.perf_counter() - w0
+        return fn
+
+
+class Loop:
+    """Drive ``world`` with ``law`` (None: the world drives every vehicle).
+
+    Args:
+        world: a :class:`~cosim.sim.world.World`.
+        law: a controller (:mod:`controllers.protocol`) or None.
+        limits: the CAVs' actuator limits.
+        safety: the safety layer, or None (off).
+        layers: constraint layers after the law (default: ``limits.layers()``).
+        obstacle: (appear_s, s_m, d_m, length_m, width_m) of a stopped vehicle, or None.
+    """
+
+    def __init__(self, world: World, law: Any, limits: ActuatorLimits,
+                 safety: SafetyLayer | None = None, layers: list[Layer] | None = None,
+                 obstacle: tuple[float, float, float, float, float] | None = None) -> None:
+        self.world = world
+        self.law = law
+        self.limits = limits
+        self.safety = safety
+        self.layers = limits.layers() if layers is None else list(layers)
+        self.obstacle = obstacle
+        self.obstacle_id: str | None = None
+        self.hooks = Hooks()
+        self.dt = float(world.dt)
+        self.k = 0
+        self.last = StepData()
+
+    # ------------------------------------------------------------------------------
+    def run(self, n_steps: int, progress: Callable[[int], Any] | None = None) -> None:
+        """Run ``n_steps`` steps; ``progress(k)`` after each (for a progress display)."""
+        protocol.reset(self.law)
+        for _ in range(n_steps):
+            self.step()
+            if progress is not None:
+                progress(self.k)
+
+    def step(self) -> StepData:
+        """One step through all phases; returns what it computed."""
+        st = StepData(k=self.k)
+        self._phase("advance", st, self._advance)
+        self._phase("observe", st, self._observe)
+        if self.law is not None and len(st.cav_rows):
+            self._phase("reference", st, self._reference)
+            self._phase("control", st, self._control)
+            self._phase("constrain", st, self._constrain)
+            self._phase("safety", st, self._safety)
+            self._phase("integrate", st, self._integrate)
+            self._phase("apply", st, self._apply)
+        self._phase("record", st, lambda s: None)
+        self.k += 1
+        self.last = st
+        return st
+
+    def _phase(self, name: str, st: StepData, fn: Callable[[StepData], None]) -> None:
+        for h in self.hooks.before.get(name, ()):
+            h(st)
+        fn(st)
+        for h in self.hooks.after.get(name, ()):
+            h(st)
+
+    # ------------------------------------------------------------------------------
+    def _advance(self, st: StepData) -> None:
+        ob = self.obstacle
+        if ob is not None and self.obstacle_id is None and self.k * self.dt >= ob[0] - 1e-9:
+            self.obstacle_id = self.world.add_obstacle(*ob[1:])
+        self.world.step()
+        st.t = self.world.time
+
+    def _observe(self, st: StepData) -> None:
+        state = self.world.observe()
+        st.state = state
+        if self.law is None:
+            return
+        rows = np.flatnonzero(state.is_cav & state.on_main & ~state.is_static)
+        st.cav_rows = rows
+        if len(rows):
+            self.world.take_over([state.ids[r] for r in rows])
+
+    def _reference(self, st: StepData) -> None:
+        state, rows = st.state, st.cav_rows
+        others = np.flatnonzero(~(state.is_cav & state.on_main & ~state.is_static)
+                                & np.isfinite(state.s))
+        q = np.column_stack([state.s[rows], state.d[rows]])
+        p = np.column_stack([state.v[rows], state.v_lat[rows]])
+        desired = state.desired[rows]
+        desired = np.where(np.isfinite(desired), desired, self.world.speed_limit_mps)
+        edges = self.world.road.narrowest(q[:, 0], p[:, 0] * EDGE_LOOKAHEAD_S)
+        st.obs = Observation(
+            q=q, p=p, t=st.t, dt=self.dt, ids=np.array([state.ids[r] for r in rows], dtype=object),
+            length=state.length[rows], width=state.width[rows],
+            others_q=np.column_stack([state.s[others], state.d[others]]),
+            others_p=np.column_stack([state.v[others], state.v_lat[others]]),
+            others_length=state.length[others], others_width=state.width[others],
+            others_ids=np.array([state.ids[r] for r in others], dtype=object),
+            road_edges=edges, period_s=self.world.period, desired_speed=desired,
+            road=self.world.road,
+        )
+
+    def _control(self, st: StepData) -> None:
+        u = self.law.compute(st.obs)
+        st.u_law = protocol.checked_command(u, st.obs.n, getattr(self.law, "name", "law"))
+
+    def _constrain(self, st: StepData) -> None:
+        u = st.u_law
+        for layer in self.layers:
+            u = layer.apply(u, st.obs)
+        st.u = u
+
+    def _safety(self, st: StepData) -> None:
+        obs = st.obs
+        if self.safety is None:
+            lim = self.limits.lat_speed_max_mps
+            st.v_lat_next = np.clip(obs.p[:, 1] + st.u[:, 1] * self.dt, -lim, lim)
+            return
+        state = st.state
+        on_road = np.flatnonzero(np.isfinite(state.s))
+        pos = np.searchsorted(on_road, st.cav_rows)
+        road = RoadState(state.s[on_road], state.d[on_road], state.v[on_road],
+                         state.length[on_road], state.width[on_road], state.v_lat[on_road])
+        st.u, st.v_lat_next = self.safety.apply(st.u, pos, obs.p[:, 1], road, obs.road_edges,
+                                                self.world.period)
+
+    def _integrate(self, st: StepData) -> None:
+        obs = st.obs
+        st.v_next = np.clip(obs.p[:, 0] + st.u[:, 0] * self.dt, 0.0, self.world.speed_limit_mps)
+        st.d_next = obs.q[:, 1] + st.v_lat_next * self.dt
+
+    def _apply(self, st: StepData) -> None:
+        self.world.apply(list(st.obs.ids), st.v_next, st.d_next, st.v_lat_next)
