@@ -189,7 +189,11 @@ def _user_entry(kind: str) -> LawEntry:
     cls = _user_class(kind)
 
     def build_user(params: dict, ctx: RoadContext) -> Any:
-        law = cls(**params)
+        try:
+            law = cls(**params)
+        except Exception as exc:  # the user's constructor refused its parameters
+            raise LawError(f"controller.kind {kind!r}: {cls.__name__}(**{params!r}) failed: "
+                           f"{type(exc).__name__}: {exc}") from None
         return _with_comm(law, ctx)
 
     return LawEntry(kind=kind, description=f"user law {kind}", params_type=None, defaults={},

@@ -296,7 +296,7 @@ def test_empty_config_is_the_default_scenario():
     ("data", "where"),
     [
         ({"scenario": {"seed": True}}, "scenario.seed"),
-        ({"scenario": {"warmup_s": 300.0}}, "scenario.warmup_s"),
+        ({"scenario": {"warmup_s": -1.0}}, "scenario.warmup_s"),
         ({"scenario": {"step_length_s": 0.0}}, "scenario.step_length_s"),
         ({"scenario": {"duration_s": float("inf")}}, "scenario.duration_s"),
         ({"network": {"kind": "spiral"}}, "network.kind"),

@@ -208,6 +208,123 @@ def test_ring_density_too_high_is_a_config_error(ring: RoadNetwork, tmp_path: Pa
         write_routes(ring, DemandSpec(ring_density_vpkm=0.0), 1, tmp_path / "r.rou.xml")
 
 
+#: TUM LaneFreeDrive's car sizes (length m, width m, probability).
+TUM_SIZES = ((3.2, 1.6, 0.2), (3.9, 1.7, 0.2), (4.5, 1.78, 0.2), (5.15, 1.84, 0.2),
+             (5.2, 1.88, 0.2))
+
+
+def _min_bumper_gap_of_overlapping(s: np.ndarray, d: np.ndarray, length: np.ndarray,
+                                   width: np.ndarray, period: float) -> float:
+    """Smallest bumper gap (m) between any two vehicles whose bodies overlap laterally,
+    centres ``s`` on a ring of ``period`` m (across the wrap too): a sorted scan, pairs k
+    places apart for k = 1, 2, ... until none can be closer (no N x N array)."""
+    order = np.argsort(s)
+    s, d, length, width = s[order], d[order], length[order], width[order]
+    n, best, idx = len(s), np.inf, np.arange(len(s))
+    for k in range(1, n):
+        j = (idx + k) % n
+        ds = np.mod(s[j] - s, period)
+        overlap = np.abs(d[j] - d) < 0.5 * (width[j] + width)
+        if overlap.any():
+            best = min(best, float((ds - 0.5 * (length[j] + length))[overlap].min()))
+        if ds.min() - length.max() > best:
+            break
+    return best
+
+
+@pytest.mark.parametrize(("density", "placement"), [
+    *((x, "even") for x in (30.0, 150.0, 225.0, 300.0, 400.0)),
+    # random sequential placement runs out of room earlier (refused: tested below)
+    *((x, "random") for x in (30.0, 150.0, 225.0, 300.0)),
+])
+def test_ring_placement_is_collision_free_up_to_400_vpkm(density: float, placement: str) -> None:
+    """1 km x 10.2 m ring, TUM's sizes (3.2-5.2 m long): every laterally overlapping pair
+    is at least RING_MIN_GAP_M apart bumper to bumper, across the wrap too (at 225 veh/km
+    the last vehicle used to sit 0.73 m inside the first), every body on the road."""
+    from cosim.demand.plan import plan_vehicles
+    from cosim.demand.spec import RING_MIN_GAP_M
+    from cosim.road.geometry import road_geometry
+
+    net = road_geometry(NetworkSpec(kind="ring", circumference_m=1000.0, width_m=10.2))
+    for seed in (1, 2, 3):
+        demand = DemandSpec(ring_density_vpkm=density, size_classes=TUM_SIZES,
+                            ring_placement=placement)
+        vs = plan_vehicles(net, demand, seed, 60.0).vehicles
+        assert len(vs) == round(density)
+        s = np.array([v.centre_s_m for v in vs])
+        d = np.array([v.lat_m for v in vs])
+        length = np.array([v.length_m for v in vs])
+        width = np.array([v.width_m for v in vs])
+        assert np.all((s >= 0.0) & (s < 1000.0))
+        assert np.all(np.abs(d) + 0.5 * width <= 5.1 + 1e-9)
+        gap = _min_bumper_gap_of_overlapping(s, d, length, width, 1000.0)
+        assert gap >= RING_MIN_GAP_M - 1e-9, (seed, gap)
+
+
+def test_ring_density_beyond_what_fits_is_refused_naming_the_maximum() -> None:
+    """4 rows of cars up to 5.2 m with 1 m gaps: 4 x floor(1000 / 6.2) = 644 vehicles on
+    1 km. 644 veh/km are placed; 645 are refused in one line that names 644 veh/km;
+    random placement, when it runs out of room, names the same figure."""
+    from cosim.demand.plan import plan_vehicles, ring_max_vehicles
+    from cosim.road.geometry import road_geometry
+
+    assert ring_max_vehicles(1000.0, 10.2, 5.2, 1.88) == 644
+    net = road_geometry(NetworkSpec(kind="ring", circumference_m=1000.0, width_m=10.2))
+    big = ((5.2, 1.88, 1.0),)
+    assert len(plan_vehicles(net, DemandSpec(ring_density_vpkm=644.0, size_classes=big),
+                             1, 60.0).vehicles) == 644
+    with pytest.raises(ConfigError, match=r"ring_density_vpkm=645 .*at most 644 veh/km") as e:
+        plan_vehicles(net, DemandSpec(ring_density_vpkm=645.0, size_classes=big), 1, 60.0)
+    assert "\n" not in str(e.value)
+    with pytest.raises(ConfigError, match="random placement.*up to 644 veh/km"):
+        plan_vehicles(net, DemandSpec(ring_density_vpkm=640.0, size_classes=big,
+                                      ring_placement="random"), 1, 60.0)
+
+
+@pytest.mark.parametrize("density", [225.0, 400.0])
+def test_dense_ring_starts_without_collision_in_the_road_world(density: float) -> None:
+    """The whole loop, SUMO-free (scenario.world = "road"): 100 % CAVs, TUM's sizes, no
+    collision in the first step (the issue: one at t = 0.1 s at 225 veh/km)."""
+    from cosim.config.scenario import scenario_from_dict
+    from cosim.sim.runner import run_scenario
+
+    sc = scenario_from_dict({
+        "scenario": {"name": "dense_ring", "duration_s": 0.2, "warmup_s": 0.0,
+                     "interval_s": 0.2, "world": "road"},
+        "network": {"kind": "ring", "circumference_m": 1000.0, "width_m": 10.2},
+        "demand": {"ring_density_vpkm": density, "cav_share": 1.0,
+                   "size_classes": [list(c) for c in TUM_SIZES]},
+    })
+    s = run_scenario(sc).summary.iloc[0]
+    assert s["vehicles_inserted"] == round(density)
+    assert s["collisions_geometric_cav"] == 0 and s["collisions_geometric_hdv_only"] == 0
+    assert s["min_gap_m"] >= 1.0
+
+
+@pytest.mark.sumo
+def test_dense_ring_starts_without_collision_in_sumo(tmp_path: Path) -> None:
+    """The same at 225 veh/km in SUMO: every vehicle inserted, no collision (SUMO's or
+    ours) at t = 0.1 s."""
+    spec = {
+        "scenario": {"name": "dense_ring", "duration_s": 0.2, "warmup_s": 0.0,
+                     "interval_s": 0.2},
+        "network": {"kind": "ring", "circumference_m": 1000.0, "width_m": 10.2},
+        "demand": {"ring_density_vpkm": 225.0, "cav_share": 1.0,
+                   "size_classes": [list(c) for c in TUM_SIZES]},
+    }
+    env = {**os.environ, "PYTHONPATH": str(REPO),
+           "COSIM_NETWORK_CACHE": str(tmp_path / "nets")}
+    proc = subprocess.run([sys.executable, str(REPO / "tests" / "sumo_cases" / "run_case.py"),
+                           str(tmp_path / "out"), json.dumps(spec)], capture_output=True,
+                          text=True, env=env, timeout=300, check=False)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    line = [x for x in proc.stdout.splitlines() if x.startswith("RESULT ")][-1]
+    s = json.loads(line[len("RESULT "):])["summary"]
+    assert s["vehicles_inserted"] == 225
+    assert s["collisions_sumo_cav"] == 0 and s["collisions_sumo_hdv_only"] == 0
+    assert s["collisions_geometric_cav"] == 0 and s["collisions_geometric_hdv_only"] == 0
+
+
 @pytest.mark.sumo
 def test_sumo_inserts_the_whole_ring_at_t0_and_keeps_it(ring: RoadNetwork, tmp_path: Path) -> None:
     demand = DemandSpec(ring_density_vpkm=40.0)

@@ -213,13 +213,15 @@ def test_vehicles_are_conserved(tmp_path, sumo_env):
 
 
 def test_dense_cav_traffic_is_collision_free_and_stays_on_the_road(tmp_path, sumo_env):
-    """100% CAVs, 6000 veh/h requested on a 500 m road for 90 s (SUMO cannot insert
-    them all): no collision of any kind, no boundary violation, and the layer worked."""
+    """100% CAVs of the time-gap flocking law (the previous default), 6000 veh/h requested
+    on a 500 m road for 90 s (SUMO cannot insert them all): no collision of any kind, no
+    boundary violation, and the layer worked (that law leans on it)."""
     r = _scenario(tmp_path, {
         "scenario": {"name": "dense", "seed": 42, "duration_s": 90.0,
                      "warmup_s": 20.0, "interval_s": 35.0},
         "network": {"kind": "straight", "length_m": 500.0},
         "demand": {"inflow_vph": 6000.0, "cav_share": 1.0},
+        "controller": {"kind": "flocking_timegap"},
         "outputs": {"trajectories": True},
     }, sumo_env)
     s = r["summary"]

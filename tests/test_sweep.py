@@ -71,12 +71,12 @@ network.length_m = 500.0
 [axes]
 "demand.inflow_vph" = [1000, 2000]
 demand.cav_share = [0.0, 0.5, 1.0]
-controller.params.c1_alpha = [0.2, 0.4]
+controller.params.time_gap_s = [0.5, 0.6]
 """)
     assert len(plan.points) == 2 * 3 * 2 * 2
     assert len({p.run_id for p in plan.points}) == len(plan.points)
     combos = {(p.scenario.demand.inflow_vph, p.scenario.demand.cav_share,
-               p.scenario.controller.law_params().c1_alpha, p.seed) for p in plan.points}
+               p.scenario.controller.law_params().time_gap_s, p.seed) for p in plan.points}
     assert len(combos) == 24
     assert all(p.scenario.network.length_m == 500.0 for p in plan.points)
     # integer axis values become the field's type (float) through scenario_from_dict
@@ -183,8 +183,8 @@ def test_base_scenario_by_name_and_by_relative_path(tmp_path):
     assert by_path.points[0].scenario.scenario.duration_s == 33.0
     by_name = sw.load_sweep(_write(tmp_path, '[sweep]\nbase = "ring"\n', "r.toml"))
     assert by_name.points[0].scenario.network.kind == "ring"
-    (tmp_path / "bad.toml").write_text('[scenario]\nduration_s = 33.0\n')
-    with pytest.raises(ConfigError, match="base scenario .*bad.toml: scenario.warmup_s"):
+    (tmp_path / "bad.toml").write_text('[scenario]\nduration_s = -33.0\n')
+    with pytest.raises(ConfigError, match="base scenario .*bad.toml: scenario.duration_s"):
         sw.load_sweep(_write(tmp_path, '[sweep]\nbase = "bad.toml"\n', "b.toml"))
 
 
@@ -357,7 +357,7 @@ network.circumference_m = 300.0
     res = pd.read_csv(out / "results.csv")
     bad = res[res["status"] == "failed"].iloc[0]
     assert bad["demand.ring_density_vpkm"] == 2000.0
-    assert "ring_density_vpkm" in bad["error"] and "too high" in bad["error"]
+    assert "ring_density_vpkm" in bad["error"] and ("too high" in bad["error"] or "does not fit" in bad["error"])
     assert (out / "runs" / bad["run_id"] / "error.txt").is_file()
 
 
@@ -590,3 +590,101 @@ def test_killing_the_sweep_ends_its_workers_and_resume_runs_each_run_once(
         if e == "start" and pid not in orphans:
             gone = [t_o for e_o, r_o, p_o, t_o in events if e_o == "orphaned" and r_o == rid]
             assert all(t > t_o for t_o in gone)
+
+
+# --------------------------------------------------------------------------------------
+# A sweep varies any kind's parameters (SUMO-free road world: fast)
+# --------------------------------------------------------------------------------------
+
+KINDS_SWEEP = """
+seeds = [1]
+
+[sweep]
+name = "kinds"
+base = "ring"
+
+[overrides]
+scenario.world = "road"
+scenario.duration_s = 20.0
+scenario.warmup_s = 5.0
+scenario.interval_s = 5.0
+demand.cav_share = 1.0
+demand.ring_density_vpkm = 42.0
+
+[[variants]]
+name = "vicsek_soft"
+controller.kind = "vicsek"
+controller.params.align_gain_per_s = 0.1
+
+[[variants]]
+name = "vicsek_stiff"
+controller.kind = "vicsek"
+controller.params.align_gain_per_s = 2.0
+
+[[variants]]
+name = "formation_soft"
+controller.kind = "formation"
+controller.params.max_pull_mps2 = 0.2
+
+[[variants]]
+name = "formation_stiff"
+controller.kind = "formation"
+controller.params.max_pull_mps2 = 1.5
+"""
+
+_KIND_PARAMS = {  # variant -> (kind, its parameter column, value)
+    "vicsek_soft": ("vicsek", "controller.params.align_gain_per_s", 0.1),
+    "vicsek_stiff": ("vicsek", "controller.params.align_gain_per_s", 2.0),
+    "formation_soft": ("formation", "controller.params.max_pull_mps2", 0.2),
+    "formation_stiff": ("formation", "controller.params.max_pull_mps2", 1.5),
+}
+
+
+def test_variants_of_two_kinds_each_vary_their_own_parameter():
+    plan = _plan(KINDS_SWEEP)
+    assert [p.variant for p in plan.points] == list(_KIND_PARAMS)
+    for p in plan.points:
+        kind, col, value = _KIND_PARAMS[p.variant]
+        assert p.scenario.controller.kind == kind
+        assert p.scenario.controller.resolved_params()[col.rsplit(".", 1)[1]] == value
+        assert p.scenario.scenario.world == "road"
+    cols = plan.param_columns()
+    assert {"controller.kind", "controller.params.align_gain_per_s",
+            "controller.params.max_pull_mps2"} <= set(cols)
+
+
+@pytest.mark.parametrize("text, message", [
+    # a parameter of the other kind: refused for the variant that does not have it
+    (KINDS_SWEEP.replace("max_pull_mps2 = 1.5", "radius_m = 9.0"),
+     r"grid point 4/4 \(variant=formation_stiff.*unknown key 'radius_m' \(known: .*K_for"),
+    # an axis every variant gets: fine for one kind, named for the other
+    (KINDS_SWEEP + '\n[axes]\n"controller.params.K_vel" = [0.1, 0.2]\n',
+     r"grid point 1/8 \(variant=vicsek_soft, controller.params.K_vel=0.1.*"
+     r"unknown key 'K_vel' \(known: align_gain_per_s"),
+])
+def test_a_parameter_the_grid_points_kind_lacks_is_one_line(text, message):
+    with pytest.raises(ConfigError, match=message):
+        _plan(text)
+
+
+def test_a_sweep_of_two_kinds_fills_each_kinds_parameter_column(tmp_path, sumo_env):
+    f = _write(tmp_path, KINDS_SWEEP)
+    out = tmp_path / "out"
+    assert sw.main([str(f), "--out", str(out), "--workers", "2", "--quiet"]) == 0
+    res = pd.read_csv(out / "results.csv").set_index("variant")
+    assert list(res.index) == list(_KIND_PARAMS) and (res["status"] == "ok").all()
+    for variant, (kind, col, value) in _KIND_PARAMS.items():
+        row = res.loc[variant]
+        assert row["controller.kind"] == kind and row[col] == value
+        other = ({"controller.params.align_gain_per_s", "controller.params.max_pull_mps2"}
+                 - {col}).pop()
+        assert pd.isna(row[other])  # not a parameter of this kind: empty, not a default
+        assert row["collisions_geometric_cav"] == 0
+        cfg = tomllib.loads((out / row["run_dir"] / "config.toml").read_text())["controller"]
+        assert cfg["kind"] == kind and cfg["params"][col.rsplit(".", 1)[1]] == value
+    # the parameter reached the law: the runs differ where it acts (a weaker pull
+    # forms the groups more slowly)
+    assert res.loc["formation_stiff", "flock_formation_error_m"] < 0.8 * res.loc[
+        "formation_soft", "flock_formation_error_m"]
+    # strong alignment keeps the ring's spacing; weak lets faster CAVs close in
+    assert res.loc["vicsek_stiff", "min_gap_m"] > 1.5 * res.loc["vicsek_soft", "min_gap_m"]

@@ -49,8 +49,10 @@ class RunSpec:
         warmup_s: time excluded from the measurements, s.
         step_length_s: SUMO and control step, s.
         lateral_resolution_m: SUMO sublane width, m (sublane model on).
-        interval_s: measurement interval of the interval table, s; the warm-up plus
-            one interval must fit in the duration.
+        interval_s: measurement interval of the interval table, s. When the warm-up plus
+            one interval do not fit in the duration, the run still runs (a short look),
+            but measures nothing after the warm-up: its summary says so
+            (``measurement_note``) instead of reporting figures.
         world: "sumo" (SUMO's road and drivers, the default) or "road" (the SUMO-free
             road world of :mod:`cosim.sim.road_world`: the same road frame, double
             integrators, non-CAVs driven by a plain IDM: for law studies and tests).
@@ -82,21 +84,19 @@ class RunSpec:
                 f"scenario.step_length_s = {self.step_length_s:g} s is longer than the run "
                 f"(duration_s = {self.duration_s:g} s)"
             )
-        if self.warmup_s >= self.duration_s:
-            raise ConfigError(
-                f"scenario.warmup_s must be < duration_s = {self.duration_s:g} s, "
-                f"got {self.warmup_s:g}"
-            )
-        if self.warmup_s + self.interval_s > self.duration_s + 1e-9:
-            raise ConfigError(
-                f"no complete measurement interval: warmup_s + interval_s = "
-                f"{self.warmup_s:g} + {self.interval_s:g} s > duration_s = {self.duration_s:g} s"
-            )
         if self.interval_s < self.step_length_s:
             raise ConfigError("scenario.interval_s must be at least one step_length_s")
         if self.world not in WORLDS:
             raise ConfigError(f"scenario.world must be one of {', '.join(WORLDS)}, "
                               f"got {self.world!r}")
+
+    def measurement_note(self) -> str:
+        """Why nothing will be measured ("" when at least one interval fits)."""
+        if self.warmup_s + self.interval_s <= self.duration_s + 1e-9:
+            return ""
+        return (f"no complete measurement interval: the {self.warmup_s:g} s warm-up plus one "
+                f"{self.interval_s:g} s interval do not fit in the {self.duration_s:g} s run "
+                "(set scenario.warmup_s and scenario.interval_s)")
 
     @property
     def n_steps(self) -> int:

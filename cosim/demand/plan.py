@@ -199,26 +199,60 @@ def _depart_lanes(net: RoadNetwork, n: int, how: str, rng: np.random.Generator) 
 
 
 def _ring_slots(width_road: float, max_car_width: float) -> int:
-    """Number of lateral slots of width >= car width + lateral gap across the road."""
+    """Number of lateral rows of width >= widest car + lateral gap across the road."""
     return max(1, int(width_road // (max_car_width + MIN_GAP_LAT_M)))
+
+
+def ring_max_vehicles(length: float, width_road: float, max_length: float,
+                      max_width: float) -> int:
+    """Most vehicles :func:`_ring_even` places on a ring of ``length`` x ``width_road`` (m)
+    whatever their sizes (up to ``max_length`` x ``max_width``, m): as many rows as fit
+    across, each holding vehicles at least the longest car plus RING_MIN_GAP_M apart."""
+    rows = _ring_slots(width_road, max_width)
+    return rows * int(length // (max_length + RING_MIN_GAP_M))
 
 
 def _ring_even(
     n: int, length: float, width_road: float, lengths: np.ndarray, widths: np.ndarray,
     density: float, rng: np.random.Generator,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Equal spacing in s, vehicle i in lateral slot i mod m (a staggered lattice)."""
+    """Centres ``(s, d)`` (m) of ``n`` vehicles spread evenly over the ring: a staggered
+    lattice of as many lateral rows as fit (:func:`_ring_slots`); vehicle i (in order of
+    ``s``) in row ``i mod rows``, each row's vehicles equally spaced around the ring (the
+    spacing ``length / n_row``, m, also across the wrap) and the rows staggered by
+    ``length / n`` (m). Rows do not overlap laterally (a lateral gap of at least
+    MIN_GAP_LAT_M), and along a row every bumper gap is at least RING_MIN_GAP_M;
+    otherwise the density is refused, naming the most the ring takes."""
     m = _ring_slots(width_road, float(widths.max()))
     spacing = length / n
-    if m * spacing < lengths.max() + RING_MIN_GAP_M:
-        max_density = 1000.0 * m / (lengths.max() + RING_MIN_GAP_M)
-        raise ConfigError(
-            f"demand.ring_density_vpkm={density} is too high for even placement on a "
-            f"{width_road:.1f} m wide ring (at most {max_density:.0f} veh/km)"
-        )
-    s = rng.uniform(0.0, spacing) + spacing * np.arange(n)
+    rows = np.arange(n) % m
+    per_row = np.bincount(rows, minlength=m)  # vehicles of each row
+    index_in_row = np.arange(n) // m
+    if per_row.min() == per_row.max():  # n a multiple of the rows: one lattice
+        s = rng.uniform(0.0, spacing) + spacing * np.arange(n)
+    else:
+        s = (rng.uniform(0.0, spacing) + spacing * rows
+             + index_in_row * (length / per_row[rows]))
+    # bumper gaps along each row (consecutive members, the last one to the first)
+    for k in range(min(m, n)):
+        members = np.flatnonzero(rows == k)
+        if len(members) < 2:
+            continue
+        ahead = np.roll(members, -1)
+        gap = length / len(members) - 0.5 * (lengths[members] + lengths[ahead])
+        if gap.min() < RING_MIN_GAP_M - 1e-9:
+            n_max = ring_max_vehicles(length, width_road, float(lengths.max()),
+                                      float(widths.max()))
+            raise ConfigError(
+                f"demand.ring_density_vpkm={density:g} does not fit on the "
+                f"{length:.0f} m x {width_road:.1f} m ring with cars up to "
+                f"{lengths.max():g} m long: {m} rows across, each car "
+                f"{lengths.max() + RING_MIN_GAP_M:g} m (longest car + {RING_MIN_GAP_M:g} m "
+                f"gap) from the next, hold at most {1000.0 * n_max / length:.0f} veh/km "
+                f"({n_max} vehicles)"
+            )
     slot_w = width_road / m
-    centres = -0.5 * width_road + (np.arange(n) % m + 0.5) * slot_w
+    centres = -0.5 * width_road + (rows + 0.5) * slot_w
     room = np.maximum(0.5 * (slot_w - widths - MIN_GAP_LAT_M), 0.0)
     d = centres + rng.uniform(-1.0, 1.0, size=n) * room
     return s, d
@@ -228,41 +262,89 @@ def _ring_random(
     n: int, length: float, width_road: float, lengths: np.ndarray, widths: np.ndarray,
     density: float, rng: np.random.Generator, max_tries: int = 2000,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Random sequential placement of non-overlapping rectangles (centre s, d)."""
+    """Random sequential placement of non-overlapping rectangles (centre s, d), m.
+
+    A candidate is kept when its bumper gap to every laterally overlapping vehicle
+    (lateral gap < MIN_GAP_LAT_M) is at least RING_MIN_GAP_M, across the wrap too; only
+    the vehicles within reach along ``s`` are checked (a sorted list, no N x N array).
+    """
+    import bisect
+
     s = np.empty(n)
     d = np.empty(n)
+    placed_s: list[float] = []  # sorted centres
+    placed_i: list[int] = []  # vehicle index of each, same order
+    reach = float(lengths.max()) + RING_MIN_GAP_M
     for i in range(n):
+        room = 0.5 * width_road - 0.5 * widths[i] - DEPART_EDGE_MARGIN_M
         for _ in range(max_tries):
-            room = 0.5 * width_road - 0.5 * widths[i] - DEPART_EDGE_MARGIN_M
             cs, cd = rng.uniform(0.0, length), rng.uniform(-room, room)
-            ds = np.abs(cs - s[:i])
-            ds = np.minimum(ds, length - ds)
-            clash = (ds < 0.5 * (lengths[i] + lengths[:i]) + RING_MIN_GAP_M) & (
-                np.abs(cd - d[:i]) < 0.5 * (widths[i] + widths[:i]) + MIN_GAP_LAT_M
-            )
-            if not clash.any():
-                s[i], d[i] = cs, cd
-                break
+            near = _ring_neighbours(placed_s, placed_i, cs, reach, length, bisect)
+            if near.size:
+                ds = np.abs(cs - s[near])
+                ds = np.minimum(ds, length - ds)
+                clash = (ds < 0.5 * (lengths[i] + lengths[near]) + RING_MIN_GAP_M) & (
+                    np.abs(cd - d[near]) < 0.5 * (widths[i] + widths[near]) + MIN_GAP_LAT_M
+                )
+                if clash.any():
+                    continue
+            s[i], d[i] = cs, cd
+            k = bisect.bisect_left(placed_s, cs)
+            placed_s.insert(k, cs)
+            placed_i.insert(k, i)
+            break
         else:
+            n_max = ring_max_vehicles(length, width_road, float(lengths.max()),
+                                      float(widths.max()))
             raise ConfigError(
-                f"demand.ring_density_vpkm={density} is too high for random placement "
-                f"(no free spot for vehicle {i + 1} of {n}); use ring_placement='even'"
+                f"demand.ring_density_vpkm={density:g} is too high for random placement "
+                f"(no free spot for vehicle {i + 1} of {n}); ring_placement = 'even' takes "
+                f"up to {1000.0 * n_max / length:.0f} veh/km here"
             )
     return s, d
+
+
+def _ring_neighbours(placed_s: list, placed_i: list, cs: float, reach: float,
+                     length: float, bisect) -> np.ndarray:
+    """Indices of placed vehicles whose centre lies within ``reach`` (m) of ``cs`` along
+    the ring (across the wrap too)."""
+    if not placed_s:
+        return np.zeros(0, dtype=int)
+    out: list[int] = []
+    for lo, hi in ((cs - reach, cs + reach), (cs - reach + length, cs + reach + length),
+                   (cs - reach - length, cs + reach - length)):
+        a = bisect.bisect_left(placed_s, lo)
+        b = bisect.bisect_right(placed_s, hi)
+        out.extend(placed_i[a:b])
+    return np.unique(np.array(out, dtype=int))
 
 
 def _min_leader_gap(
     s: np.ndarray, d: np.ndarray, lengths: np.ndarray, widths: np.ndarray, period: float
 ) -> float:
-    """Smallest bumper gap (m) from any vehicle to a leader within lateral reach (periodic s)."""
-    ds = np.mod(s[None, :] - s[:, None], period)  # [i, j]: how far j is ahead of i
-    gap = ds - 0.5 * (lengths[None, :] + lengths[:, None])
-    near = np.abs(d[None, :] - d[:, None]) < (
-        0.5 * (widths[None, :] + widths[:, None]) + RING_LEADER_LATERAL_REACH_M
-    )
-    np.fill_diagonal(near, False)
-    near &= gap >= 0.0  # side-by-side neighbours are not leaders
-    return float(gap[near].min()) if near.any() else float("inf")
+    """Smallest bumper gap (m) from any vehicle to a leader within lateral reach (periodic
+    s): a sorted scan, vehicle k places ahead for k = 1, 2, ... until no closer leader can
+    follow (no N x N array)."""
+    n = len(s)
+    if n < 2:
+        return float("inf")
+    order = np.argsort(s, kind="stable")
+    s, d, lengths, widths = s[order], d[order], lengths[order], widths[order]
+    best = np.inf
+    max_len = float(lengths.max())
+    idx = np.arange(n)
+    for k in range(1, n):
+        j = (idx + k) % n
+        ds = np.mod(s[j] - s, period)  # how far j is ahead of i
+        gap = ds - 0.5 * (lengths[j] + lengths)
+        near = np.abs(d[j] - d) < 0.5 * (widths[j] + widths) + RING_LEADER_LATERAL_REACH_M
+        near &= gap >= 0.0  # side-by-side neighbours are not leaders
+        if near.any():
+            best = min(best, float(gap[near].min()))
+        # every later leader is at least this far ahead: no smaller gap can follow
+        if float(ds.min()) - max_len > best:
+            break
+    return float(best)
 
 
 def ring_route_repeat(net: RoadNetwork, duration_s: float) -> int:

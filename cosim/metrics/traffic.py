@@ -27,6 +27,9 @@ Definitions (units in names):
   ``(TTC* - TTC) dt`` over those steps). ``TTC* = 1.5 s`` by default, the maximum TTC
   of a conflict in FHWA's Surrogate Safety Assessment Model (Gettman et al.,
   FHWA-HRT-08-051, 2008); ``outputs.ttc_threshold_s`` sets it.
+* **Speed shortfall**: the mean of ``v_des - v`` over the vehicle-steps in the zone
+  after warm-up, per kind (CAVs, human drivers), m/s: how far traffic falls short of
+  what its drivers want (0: everybody at the desired speed).
 * **Boundary violations**: vehicle-steps with any part of the body outside
   the road edges, distinct vehicles, worst excursion (m).
 * **Collisions**: SUMO's own list (``simulation.getCollisions``) and a
@@ -61,6 +64,7 @@ class StepState:
     edge_right: np.ndarray  # lateral road edges at each vehicle, m
     edge_left: np.ndarray
     is_static: np.ndarray | None = None  # bool: a stopped obstacle (collisions only)
+    desired: np.ndarray | None = None  # desired speed, m/s (NaN: unknown)
 
 
 def overlapping_pairs(st: StepState, period: float | None) -> np.ndarray:
@@ -197,6 +201,7 @@ class TrafficRecorder:
         self._prev_front: dict = {}
         self._prev_overlaps: set = set()
         self._prev_sumo: set = set()
+        self._shortfall = {"cav": [0.0, 0], "hdv": [0.0, 0]}  # sum (m/s), vehicle-steps
         self._boundary_ids: set = set()
         self.worst_excursion_m = 0.0
         self.boundary_vehicle_steps = 0
@@ -235,6 +240,11 @@ class TrafficRecorder:
         if acc is not None:
             acc.tts_s += self.dt * int(np.count_nonzero(in_zone))
             acc.ttd_m += self.dt * float(np.sum(st.v[in_zone]))
+            if st.desired is not None:
+                for kind, mask in (("cav", st.is_cav), ("hdv", ~st.is_cav)):
+                    sel = in_zone & mask & np.isfinite(st.desired)
+                    self._shortfall[kind][0] += float(np.sum(st.desired[sel] - st.v[sel]))
+                    self._shortfall[kind][1] += int(np.count_nonzero(sel))
 
         # Cross-section counts (front bumper passes x between steps).
         front = dict(zip(st.ids, st.s_front, strict=True))
@@ -409,6 +419,11 @@ class TrafficRecorder:
                 self.tet_veh_s / self.measured_vehicle_s if self.measured_vehicle_s else np.nan
             ),
             "vehicle_steps": self.vehicle_steps,
+            # mean (desired - actual) speed in the zone after warm-up, per kind, m/s
+            "cav_speed_shortfall_mps": (self._shortfall["cav"][0] / self._shortfall["cav"][1]
+                                        if self._shortfall["cav"][1] else np.nan),
+            "hdv_speed_shortfall_mps": (self._shortfall["hdv"][0] / self._shortfall["hdv"][1]
+                                        if self._shortfall["hdv"][1] else np.nan),
             "n_intervals": len(rows),
         }
         for x in self.xs:

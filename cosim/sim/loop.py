@@ -35,6 +35,7 @@ from controllers import protocol
 from controllers.constraints import ActuatorLimits, Layer
 from controllers.observation import Observation
 from controllers.safety import RoadState, SafetyLayer
+from cosim.errors import CosimError
 from cosim.sim.world import RoadSnapshot, World
 
 PHASES = ("advance", "observe", "reference", "control", "constrain", "safety", "integrate",
@@ -212,7 +213,12 @@ class Loop:
 
     def _control(self, st: StepData) -> None:
         u = self.law.compute(st.obs)
-        st.u_law = protocol.checked_command(u, st.obs.n, getattr(self.law, "name", "law"))
+        name = getattr(self.law, "name", None) or type(self.law).__name__
+        try:
+            st.u_law = protocol.checked_command(u, st.obs.n, name)
+        except (TypeError, ValueError) as exc:  # a law breaking the protocol: one line
+            msg = str(exc) if name in str(exc) else f"{name}.compute returned {exc}"
+            raise CosimError(f"{msg} (step {st.k}, t = {st.t:g} s)") from None
 
     def _constrain(self, st: StepData) -> None:
         u = st.u_law

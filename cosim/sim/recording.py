@@ -30,7 +30,7 @@ def step_state(st: StepData, road) -> StepState:
         t=st.t, ids=[state.ids[r] for r in rows], s=state.s[rows], s_front=state.s_front[rows],
         d=state.d[rows], v=state.v[rows], v_lat=state.v_lat[rows], length=state.length[rows],
         width=state.width[rows], is_cav=state.is_cav[rows], edge_right=edges[:, 0],
-        edge_left=edges[:, 1], is_static=state.is_static[rows],
+        edge_left=edges[:, 1], is_static=state.is_static[rows], desired=state.desired[rows],
     )
 
 

@@ -31,6 +31,7 @@ from cosim.demand.plan import DemandPlan
 from cosim.demand.spec import (
     ACCEL_MPS2,
     CAV_TAU_S,
+    DECEL_MPS2,
     EMERGENCY_DECEL_MPS2,
     HDV_TAU_S,
     MIN_GAP_M,
@@ -203,7 +204,10 @@ class RoadWorld:
             self._next += 1
 
     def _room(self, s: float, pv) -> bool:
-        """True when the gap ahead in the new vehicle's band allows ``s0 + v0 T``."""
+        """True when the new vehicle fits behind the vehicle ahead in its band: a gap of at
+        least ``s0 + v0 T`` and a departure speed ``v0`` it could stop from behind that
+        vehicle braking (Krauss's safe speed with the vType's deceleration), as SUMO's
+        insertion check does for a given departure speed."""
         n = self.n
         if n == 0:
             return True
@@ -216,7 +220,14 @@ class RoadWorld:
             return True
         v0 = pv.v0_mps if pv.v0_mps is not None else pv.speed
         tau = CAV_TAU_S if pv.is_cav else HDV_TAU_S
-        return float(gap[ahead].min()) >= MIN_GAP_M + v0 * tau
+        k = int(np.argmin(np.where(ahead, gap, np.inf)))
+        g = float(gap[k])
+        if g < MIN_GAP_M + v0 * tau:
+            return False
+        b = DECEL_MPS2
+        v_l = float(self.v[k])
+        v_safe = -b * tau + np.sqrt((b * tau) ** 2 + v_l * v_l + 2 * b * max(g - MIN_GAP_M, 0.0))
+        return v0 <= v_safe + 1e-9
 
     def _append(self, vid, s, d, v, length, width, is_cav, desired, tau) -> None:
         i = self.n

@@ -157,8 +157,11 @@ def _run_in(sc: Scenario, work: Path, gui: bool, progress, hooks) -> RunResult:
     world, net, plan, detectors = build_world(sc, work, gui)
     zone, xs = measurement_layout(sc, net.length_m, net.periodic)
     period = net.length_m if net.periodic else None
-    law = registry.build(sc.controller.kind, sc.controller.law_params(),
-                         sc.law_context(world.road))
+    try:
+        law = registry.build(sc.controller.kind, sc.controller.law_params(),
+                             sc.law_context(world.road))
+    except registry.LawError as exc:
+        raise ConfigError(str(exc)) from None
     safety = None
     if sc.safety.enabled:
         safety = SafetyLayer(SafetyConfig.for_run(sc.safety, run.step_length_s, sc.limits))
@@ -190,6 +193,7 @@ def _run_in(sc: Scenario, work: Path, gui: bool, progress, hooks) -> RunResult:
 
     summary = traffic.summary()
     summary.update(jams.summary())
+    summary["measurement_note"] = run.measurement_note()
     obstacle_id = loop.obstacle_id
     n_planned = len(plan.vehicles)
     n_departed = len(rec.departed - {obstacle_id})

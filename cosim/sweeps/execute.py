@@ -759,6 +759,7 @@ def _prebuild_networks(plan: SweepPlan, todo: set[str]) -> None:
     """Build each distinct network once, before any run (netconvert errors fail early)."""
     from cosim.road.build import build_network
 
-    specs = {p.scenario.network for p in plan.points if p.run_id in todo}
+    specs = {p.scenario.network for p in plan.points
+             if p.run_id in todo and p.scenario.scenario.world == "sumo"}
     for spec in specs:
         build_network(spec)
