@@ -8,7 +8,10 @@ Rules, applied in this order to CAV ``i`` with command ``u_i``:
 1. **Road edges** (lateral): the next lateral position keeps the body at
    least ``edge_margin`` inside the road, and the lateral speed towards an
    edge never exceeds ``sqrt(2 a_lat g)`` with ``g`` the remaining distance, so
-   the vehicle can always stop laterally before the edge.
+   the vehicle can always stop laterally before the edge. The edges are the
+   narrowest within the vehicle's stopping distance (the caller's choice); a
+   narrowing further ahead that the body does not fit into is a stopped
+   leader for rule 3 (``wall_gap``), so a CAV that cannot move in stops before it.
 2. **Side clearance** (lateral): vehicles that overlap longitudinally (with a
    speed-dependent buffer ahead and behind) bound the next lateral position so
    that the side-to-side clearance stays above ``lateral_clearance`` even if
@@ -183,6 +186,7 @@ class SafetyLayer:
         road: RoadState,
         edges: np.ndarray,
         period: float | None = None,
+        wall_gap: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Safe command for the CAVs.
 
@@ -193,6 +197,9 @@ class SafetyLayer:
             road: all vehicles, CAVs included.
             edges: (N, 2) right and left road edge at each CAV, m.
             period: ring length, m, or None.
+            wall_gap: (N,) distance from each CAV's front to the start of a road piece ahead
+                that its body does not fit into at its lateral position (a narrowing), m;
+                inf where none. The speed rule treats it as a stopped leader.
 
         Returns:
             (u_safe (N, 2), v_lat_next (N,)): the longitudinal acceleration to
@@ -280,6 +287,10 @@ class SafetyLayer:
         v_safe_pair = krauss_safe_speed(gap, road.v[j], c)
         v_safe = np.full(n, np.inf)
         np.minimum.at(v_safe, i[ahead], v_safe_pair[ahead])
+        if wall_gap is not None:
+            finite = np.isfinite(wall_gap)
+            v_wall = krauss_safe_speed(np.where(finite, wall_gap - 0.5, 0.0), np.zeros(n), c)
+            v_safe = np.where(finite, np.minimum(v_safe, v_wall), v_safe)
         u_max = (v_safe - v) / dt
         u_long = np.minimum(u[:, 0], u_max)
         u_long = np.maximum(u_long, -c.own_decel_mps2)

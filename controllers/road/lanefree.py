@@ -134,7 +134,9 @@ class LaneFreeParams:
         candidate_step_m: spacing of candidate lateral positions, m.
         lookahead_s, lookahead_min_m: stopped obstacles ahead considered for the target (at
             least ``lookahead_min_m``, or ``lookahead_s`` of travel), s and m.
-        edge_lookahead_min_m: the same for the road edges (a narrowing), m.
+        edge_lookahead_min_m, edge_lookahead_s: road edges ahead (a narrowing) bounding the
+            lateral target and position: at least this far, or this long of travel (longer
+            than the loop's 4 s, so a CAV is inside before the safety layer looks), m and s.
         scan_margin_m: lateral gap below which a vehicle ahead blocks a candidate band, m.
         scan_time_gap_s: time gap of the offered-speed estimate, s.
         scan_decel_mps2: deceleration of the offered-speed estimate, m/s^2 (below the
@@ -191,6 +193,7 @@ class LaneFreeParams:
     lookahead_s: float = 5.0
     lookahead_min_m: float = 400.0
     edge_lookahead_min_m: float = 100.0
+    edge_lookahead_s: float = 8.0
     scan_margin_m: float = 0.35
     scan_time_gap_s: float = 4.0
     scan_decel_mps2: float = 1.0
@@ -229,7 +232,7 @@ class LaneFreeParams:
                      "follow_margin_m", "lat_gain", "lat_damping", "lateral_clearance_m",
                      "edge_margin_m", "side_buffer_m", "side_buffer_s", "repulsion_gain",
                      "side_buffer_speed_s", "lookahead_min_m", "edge_lookahead_min_m",
-                     "scan_margin_m", "move_cost", "clear_gain",
+                     "edge_lookahead_s", "scan_margin_m", "move_cost", "clear_gain",
                      "clear_cap_m", "nudge_gain", "hysteresis_mps", "order_gain",
                      "bias_speed_low_mps", "urgent_gain_mps", "bias_speed_high_mps",
                      "queue_speed_mps", "queue_hysteresis",
@@ -328,8 +331,9 @@ class LaneFreeFlocking:
         win = self._window(sc, obs.period_s)
         targets = self._targets(obs, sc, win, ids)
         u = np.empty((n, 2))
-        u[:, 0] = self._longitudinal(obs, sc, win, targets)
-        u[:, 1] = self._lateral(obs, sc, win, targets)
+        side = self._side(obs, sc, win)
+        u[:, 0] = self._longitudinal(obs, sc, win, targets, side)
+        u[:, 1] = self._lateral(obs, sc, win, targets, side)
         u[:, 0] = np.clip(u[:, 0], self.long_min, self.long_max)
         u[:, 1] = np.clip(u[:, 1], -self.lat_max, self.lat_max)
         self._remember(obs, sc, ids, u)
@@ -421,7 +425,8 @@ class LaneFreeFlocking:
             urgent[rows] = np.where(changed, need, urgent[rows] & (need | ~changed))
         # a target outside the road ahead (narrowing) is pulled inside at once
         target = np.clip(target, lo, np.maximum(lo, hi))
-        arrived = np.abs(target - sc.d[:n]) < 0.5 * sc.width[:n]
+        arrived = (np.abs(target - sc.d[:n]) < 0.5 * sc.width[:n]) & (sc.d[:n] >= lo - 0.05) & (
+            sc.d[:n] <= hi + 0.05)  # and inside the road ahead
         urgent &= ~arrived
         for i, t, u in zip(ids, target, urgent, strict=True):
             self._target[i] = float(t)
@@ -435,7 +440,7 @@ class LaneFreeFlocking:
         n = sc.n
         w = sc.width[:n]
         if obs.road is not None:
-            ahead = np.maximum(p.edge_lookahead_min_m, sc.v[:n] * p.lookahead_s)
+            ahead = np.maximum(p.edge_lookahead_min_m, sc.v[:n] * p.edge_lookahead_s)
             edges = obs.road.narrowest(sc.s[:n], ahead)
         elif obs.road_edges is not None:
             edges = obs.road_edges
@@ -444,6 +449,7 @@ class LaneFreeFlocking:
         if obs.road_edges is not None:  # never wider than what the loop enforces
             edges = np.column_stack([np.maximum(edges[:, 0], obs.road_edges[:, 0]),
                                      np.minimum(edges[:, 1], obs.road_edges[:, 1])])
+        self._edges_plan = edges
         lo = edges[:, 0] + 0.5 * w + p.edge_margin_m
         hi = edges[:, 1] - 0.5 * w - p.edge_margin_m
         return lo, hi
@@ -527,7 +533,9 @@ class LaneFreeFlocking:
         # here is blocked (a stopped obstacle ahead)
         k_here = np.argmin(np.abs(cand - d_i[:, None]), axis=1)
         offer_here = offer[r, k_here]
-        need = blocked[r, k_here] & (gain > 0) & ~blocked[r, k_best]
+        # outside the road ahead (a narrowing): leaving is urgent too
+        outside = (d_i < lo - 0.05) | (d_i > hi + 0.05)
+        need = (blocked[r, k_here] | outside) & (gain > 0) & ~blocked[r, k_best]
         need |= (offer[r, k_best] - offer_here > np.maximum(p.urgent_gain_mps, 0.3 * v_i)) & (
             v_i > p.queue_speed_mps) & (gain > 0)
         return best, gain, need
@@ -539,7 +547,7 @@ class LaneFreeFlocking:
         return np.concatenate([v_des, sc.v[sc.n:]])
 
     # ------------------------------------------------------------------ longitudinal
-    def _longitudinal(self, obs, sc, win, targets) -> np.ndarray:
+    def _longitudinal(self, obs, sc, win, targets, side) -> np.ndarray:
         p = self.params
         n = sc.n
         v = sc.v[:n]
@@ -552,6 +560,10 @@ class LaneFreeFlocking:
                                period=obs.period_s, lateral_margin_m=p.follow_margin_m, v=sc.v)
         has = np.isfinite(gap)
         u = np.minimum(u, np.where(has, self._approach(gap, v_l, v), np.inf))
+        # a narrowing ahead that this CAV's body does not fit into where it is: its start
+        # is a stopped wall for the approach bound (the CAV merges or waits before it)
+        if obs.road is not None and not obs.road.is_constant:
+            u = np.minimum(u, self._narrowing(obs, sc, side))
         # window leaders: overlapping now or within the anticipation horizon
         j, ds = win["j"], win["ds"]
         g = ds - 0.5 * (sc.length[:n, None] + sc.length[j])
@@ -575,7 +587,7 @@ class LaneFreeFlocking:
         # zipper: an announced mover slots in behind every vehicle in its target band that
         # is ahead of it, or behind it but unable to let it in (it would have to brake
         # harder than yield_decel_mps2 to fall back behind the mover)
-        mover = self._urgent_now & (np.abs(targets - sc.d[:n]) > 0.5 * sc.width[:n])
+        mover = self._urgent_now
         if mover.any():
             in_target = np.abs(sc.d[j] - targets[:, None]) < half + p.follow_margin_m
             # what a vehicle behind would need to let this mover in, m/s^2
@@ -590,6 +602,37 @@ class LaneFreeFlocking:
             u_z = np.maximum(u_z, -p.comfort_decel_mps2)
             u = np.minimum(u, np.min(np.where(z, u_z, np.inf), axis=1))
         return u
+
+    def _narrowing(self, obs, sc, side) -> np.ndarray:
+        """Approach bound (N,) m/s^2 to the start of the first road piece ahead (within the
+        look-ahead) whose edges exclude the CAV's body at its lateral position by more than
+        it can still move sideways before it gets there; inf if none."""
+        p = self.params
+        n = sc.n
+        road = obs.road
+        s, d = sc.s[:n], sc.d[:n]
+        half_w = 0.5 * sc.width[:n] + 0.1
+        ds = road.s0[None, :] - s[:, None]  # (N, K)
+        if road.periodic:
+            ds = np.mod(ds, road.length_m)
+        look = np.maximum(p.edge_lookahead_min_m, sc.v[:n] * p.lookahead_s)
+        # lateral shift the body needs to fit the piece, and what it can still do before
+        # reaching it (half the lateral speed limit and half the bound deceleration)
+        need = np.maximum(road.right[None, :] - (d[:, None] - half_w[:, None]),
+                          (d[:, None] + half_w[:, None]) - road.left[None, :])
+        t_avail = np.maximum(ds, 0.0) / np.maximum(sc.v[:n], 1.0)[:, None]
+        can = np.minimum(0.5 * self.lat_speed_max * t_avail,
+                         0.25 * p.a_lat_bound_mps2 * t_avail**2)
+        # a vehicle alongside on the side the CAV must move to blocks it now
+        to_left = road.right[None, :] > d[:, None] - half_w[:, None]
+        room = np.where(to_left, side["hi"][:, None] - d[:, None],
+                        d[:, None] - side["lo"][:, None])
+        can = np.minimum(can, np.maximum(room, 0.0) + 0.1)
+        wall = (ds > 0) & (ds < look[:, None]) & (need > can)
+        if not wall.any():
+            return np.full(n, np.inf)
+        g = np.min(np.where(wall, ds, np.inf), axis=1) - 0.5 * sc.length[:n]
+        return np.where(np.isfinite(g), self._approach(g, np.zeros(n), sc.v[:n]), np.inf)
 
     def _follow(self, g, v_j, a_j, j_cav, v, t_cav, t_hdv) -> np.ndarray:
         """CACC (CAV leaders) or ACC (others) command, m/s^2, element-wise; inf for a leader
@@ -627,9 +670,8 @@ class LaneFreeFlocking:
         # announced target of each neighbour CAV (its own position if none or not a CAV)
         tgt_all = sc.d.copy()
         tgt_all[:n] = targets
-        announced = np.zeros(len(sc.s), bool)
-        announced[:n] = self._urgent_now
-        moving = announced & (np.abs(tgt_all - sc.d) > 0.5 * sc.width)
+        moving = np.zeros(len(sc.s), bool)
+        moving[:n] = self._urgent_now
         # a mover ahead whose target band overlaps this CAV (now) asks it to open a gap
         half = 0.5 * (sc.width[:n, None] + sc.width[j])
         into = np.abs(tgt_all[j] - sc.d[:n, None]) < half + p.follow_margin_m
@@ -674,12 +716,11 @@ class LaneFreeFlocking:
         return out
 
     # ------------------------------------------------------------------ lateral
-    def _lateral(self, obs, sc, win, targets) -> np.ndarray:
+    def _side(self, obs, sc, win) -> dict:
+        """Vehicles alongside each CAV (N, K) and the lateral bounds (N,) m they set: the
+        CAV may not come closer to them than ``lateral_clearance_m`` (plus their step)."""
         p = self.params
         n = sc.n
-        d, vl = sc.d[:n], sc.v_lat[:n]
-        u = p.lat_gain * (targets - d) - p.lat_damping * vl
-        # barrier repulsion from vehicles alongside
         j, ds = win["j"], win["ds"]
         half_l = 0.5 * (sc.length[:n, None] + sc.length[j])
         half_w = 0.5 * (sc.width[:n, None] + sc.width[j])
@@ -699,30 +740,50 @@ class LaneFreeFlocking:
         v_ok = np.where(g_pair < 0, 0.0, -b * tau + root)
         along |= np.isfinite(ds) & (v_follow > v_ok - p.cut_in_speed_margin_mps) & (
             v_follow > 0.01)  # at a standstill nobody cuts in
+        shift = np.where(sc.is_cav[j], self.lat_speed_max * obs.dt, np.abs(sc.v_lat[j]) * obs.dt)
+        need = half_w + p.lateral_clearance_m + shift
+        hi_n = np.min(np.where(along & (win["dd"] >= 0), sc.d[j] - need, np.inf), axis=1)
+        lo_n = np.max(np.where(along & (win["dd"] < 0), sc.d[j] + need, -np.inf), axis=1)
+        return {"along": along, "half_w": half_w, "hi": hi_n, "lo": lo_n}
+
+    def _lateral(self, obs, sc, win, targets, side) -> np.ndarray:
+        p = self.params
+        n = sc.n
+        d, vl = sc.d[:n], sc.v_lat[:n]
+        u = p.lat_gain * (targets - d) - p.lat_damping * vl
+        # barrier repulsion from vehicles alongside
+        along, half_w = side["along"], side["half_w"]
         side_gap = np.abs(win["dd"]) - half_w
         push = np.where(along & (side_gap < 2.0 * p.lateral_clearance_m),
                         p.repulsion_gain * (2.0 * p.lateral_clearance_m - side_gap)
                         / (2.0 * p.lateral_clearance_m), 0.0)
         u -= np.sum(np.sign(win["dd"]) * push, axis=1)
         # boundary bounds: stop laterally before the clearance and the road edges
-        shift = np.where(sc.is_cav[j], self.lat_speed_max * obs.dt, np.abs(sc.v_lat[j]) * obs.dt)
-        need = half_w + p.lateral_clearance_m + shift
-        hi = np.min(np.where(along & (win["dd"] >= 0), sc.d[j] - need, np.inf), axis=1)
-        lo = np.max(np.where(along & (win["dd"] < 0), sc.d[j] + need, -np.inf), axis=1)
-        if obs.road_edges is not None:
-            w = sc.width[:n]
-            hi = np.minimum(hi, obs.road_edges[:, 1] - 0.5 * w - p.edge_margin_m)
-            lo = np.maximum(lo, obs.road_edges[:, 0] + 0.5 * w + p.edge_margin_m)
+        hi_n, lo_n = side["hi"], side["lo"]
         a = p.a_lat_bound_mps2
-        v_hi = np.where(hi > d, np.sqrt(2 * a * np.maximum(hi - d, 0.0)), 0.0)
-        v_lo = np.where(lo < d, -np.sqrt(2 * a * np.maximum(d - lo, 0.0)), 0.0)
-        v_hi = np.minimum(v_hi, self.lat_speed_max)
-        v_lo = np.maximum(v_lo, -self.lat_speed_max)
-        # squeezed from both sides: hold still (a neighbour's move is bounded by its own law)
-        squeezed = v_lo > v_hi
-        v_lo = np.where(squeezed, 0.0, v_lo)
-        v_hi = np.where(squeezed, 0.0, v_hi)
-        v_next = np.clip(vl + u * obs.dt, v_lo, v_hi)
+        vmax = self.lat_speed_max
+        # neighbours: never move closer than the clearance (no push back: theirs to keep)
+        v_hi_n = np.minimum(np.where(hi_n > d, np.sqrt(2 * a * np.maximum(hi_n - d, 0.0)), 0.0),
+                            vmax)
+        v_lo_n = np.maximum(np.where(lo_n < d, -np.sqrt(2 * a * np.maximum(d - lo_n, 0.0)), 0.0),
+                            -vmax)
+        # road edges (narrowest over the target's look-ahead, longer than the safety
+        # layer's): stop before them, and steer back in when outside already (the road
+        # ahead narrows), early enough to be inside before the safety layer looks
+        v_hi_e = np.full(n, vmax)
+        v_lo_e = np.full(n, -vmax)
+        edges = getattr(self, "_edges_plan", None)  # the target's look-ahead (longer)
+        if edges is not None and len(edges) == n:
+            w = sc.width[:n]
+            hi_e = edges[:, 1] - 0.5 * w - p.edge_margin_m
+            lo_e = edges[:, 0] + 0.5 * w + p.edge_margin_m
+            v_hi_e = np.clip(np.sign(hi_e - d) * np.sqrt(2 * a * np.abs(hi_e - d)), -vmax, vmax)
+            v_lo_e = np.clip(-np.sign(d - lo_e) * np.sqrt(2 * a * np.abs(d - lo_e)), -vmax, vmax)
+            v_lo_e = np.minimum(v_lo_e, v_hi_e)  # a road narrower than the body: its centre
+        want = vl + u * obs.dt
+        v_next = np.clip(np.clip(want, v_lo_e, v_hi_e), v_lo_n, v_hi_n)  # neighbours first
+        # squeezed between neighbours: hold still (their moves are bounded by their laws)
+        v_next = np.where(v_lo_n > v_hi_n, 0.0, v_next)
         return (v_next - vl) / obs.dt
 
     # ------------------------------------------------------------------ memory

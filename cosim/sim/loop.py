@@ -5,8 +5,8 @@ Each step runs these phases in order (:data:`PHASES`):
 ``advance``    the world moves one step (SUMO's ``simulationStep``, or the road world's);
 ``observe``    every vehicle in the road frame (:class:`~cosim.sim.world.RoadSnapshot`);
                new CAVs on the main route are taken over;
-``reference``  the CAVs' observation: desired speeds, the road edges over the next
-               ``EDGE_LOOKAHEAD_S`` seconds of travel, the vehicles they sense;
+``reference``  the CAVs' observation: desired speeds, the road edges (the narrowest
+               within the stopping distance), the road profile, the vehicles they sense;
 ``control``    the law: ``u = law.compute(obs)``, (N, 2) m/s^2;
 ``constrain``  the actuator box and jerk limit (each counts its clips);
 ``safety``     the safety layer (a backstop: it counts every intervention);
@@ -41,8 +41,11 @@ from cosim.sim.world import RoadSnapshot, World
 PHASES = ("advance", "observe", "reference", "control", "constrain", "safety", "integrate",
           "apply", "record")
 
-#: Seconds of travel over which the road edges ahead bound a CAV's lateral position.
-EDGE_LOOKAHEAD_S = 4.0
+#: Road edges ahead that bound a CAV's lateral position: over its stopping distance at the
+#: emergency deceleration plus this margin, m.
+EDGE_MARGIN_AHEAD_M = 5.0
+#: How far ahead a narrowing is a wall for the safety layer's speed rule, m.
+WALL_REACH_M = 250.0
 
 
 @dataclass
@@ -199,7 +202,9 @@ class Loop:
         p = np.column_stack([state.v[rows], state.v_lat[rows]])
         desired = state.desired[rows]
         desired = np.where(np.isfinite(desired), desired, self.world.speed_limit_mps)
-        edges = self.world.road.narrowest(q[:, 0], p[:, 0] * EDGE_LOOKAHEAD_S)
+        b = self.limits.emergency_decel_mps2
+        stop = p[:, 0] * self.dt + p[:, 0] ** 2 / (2 * b) + EDGE_MARGIN_AHEAD_M
+        edges = self.world.road.narrowest(q[:, 0], stop)
         st.obs = Observation(
             q=q, p=p, t=st.t, dt=self.dt, ids=np.array([state.ids[r] for r in rows], dtype=object),
             length=state.length[rows], width=state.width[rows],
@@ -238,7 +243,23 @@ class Loop:
         road = RoadState(state.s[on_road], state.d[on_road], state.v[on_road],
                          state.length[on_road], state.width[on_road], state.v_lat[on_road])
         st.u, st.v_lat_next = self.safety.apply(st.u, pos, obs.p[:, 1], road, obs.road_edges,
-                                                self.world.period)
+                                                self.world.period, self._wall_gap(obs))
+
+    def _wall_gap(self, obs: Observation) -> np.ndarray | None:
+        """Distance (N,) m from each CAV's front to the first road piece within
+        ``WALL_REACH_M`` whose edges its body does not fit into at its lateral position."""
+        road = self.world.road
+        if road.is_constant:
+            return None
+        ds = road.s0[None, :] - obs.q[:, 0:1]
+        if road.periodic:
+            ds = np.mod(ds, road.length_m)
+        half = 0.5 * obs.width[:, None]
+        out = (obs.q[:, 1:2] - half < road.right[None, :]) | (
+            obs.q[:, 1:2] + half > road.left[None, :])
+        wall = (ds > 0) & (ds < WALL_REACH_M) & out
+        gap = np.min(np.where(wall, ds, np.inf), axis=1) - 0.5 * obs.length
+        return gap
 
     def _integrate(self, st: StepData) -> None:
         obs = st.obs
