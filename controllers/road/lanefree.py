@@ -75,12 +75,13 @@ its own lane-free position, with time gap ``coop_time_gap_s``, braking at most a
 ``yield_decel_mps2`` (politeness); a CAV ahead of it does nothing, so the mover slots in
 behind: it treats the vehicles in its target band that are ahead of it as leaders at the
 same time gap, braking at most at the comfortable deceleration. A CAV behind the mover that
-would have to brake harder than ``yield_decel_mps2`` to let it in goes on instead, and the
-mover, which computes the same test, falls in behind it too (zipper order: the one further
-ahead goes first unless the other cannot let it in; nothing waits for a vehicle that waits
-for it). Human drivers are not cooperative:
-a slow or stopped human driver whose own band is blocked ahead is given the same yield by
-the CAVs behind it in the neighbouring bands, so it can merge out (nobody traps it).
+would have to brake harder than ``yield_decel_mps2`` to let it in, or is already closer
+behind it than the gap the mover needs beside it, goes on instead, and the mover, which
+computes the same test, falls in behind it (zipper order: the one further ahead goes first
+unless the other cannot let it in; nothing waits for a vehicle that waits for it). Human
+drivers are not cooperative: a slow or stopped human driver whose own band is blocked
+ahead is given the same yield by the CAVs behind it in the neighbouring bands, so it can
+merge out (nobody traps it).
 
 All terms are vectorised over the CAVs with a fixed window of neighbours in road order
 (no N x N array); memory across steps (targets, last accelerations, speeds of others) is
@@ -159,6 +160,10 @@ class LaneFreeParams:
     Cooperation:
         coop_time_gap_s: time gap to a virtual leader (an announced mover), s.
         yield_decel_mps2: strongest braking to let a mover in, m/s^2.
+        yield_timeout_s, yield_cooldown_s: a CAV lets the same vehicle in for at most this
+            long, then goes on for the cool-down, s (nothing waits forever).
+        zipper_slack_m: a CAV closer behind a mover than ``side_buffer_m`` plus this cannot
+            let it in (the mover needs that gap beside it) and goes on instead, m.
         window: neighbours in road order looked at on each side of a CAV.
     """
 
@@ -209,6 +214,9 @@ class LaneFreeParams:
     bias_speed_low_mps: float = 25.0
     bias_speed_high_mps: float = 35.0
     coop_time_gap_s: float = 0.35
+    yield_timeout_s: float = 8.0
+    yield_cooldown_s: float = 6.0
+    zipper_slack_m: float = 0.3
     yield_decel_mps2: float = 2.0
     window: int = 16
 
@@ -223,7 +231,8 @@ class LaneFreeParams:
                 raise ParameterError(f"{name} must be a finite number, got {value!r}")
         positive = ("time_gap_s", "time_gap_hdv_s", "comfort_decel_mps2", "a_lat_bound_mps2",
                     "replan_s", "candidate_step_m", "lookahead_s", "scan_time_gap_s",
-                    "coop_time_gap_s", "yield_decel_mps2", "speed_gain", "scan_decel_mps2")
+                    "coop_time_gap_s", "yield_decel_mps2", "speed_gain", "scan_decel_mps2",
+                    "yield_timeout_s", "yield_cooldown_s")
         for name in positive:
             if not getattr(self, name) > 0:
                 raise ParameterError(f"{name} must be > 0, got {getattr(self, name)!r}")
@@ -231,7 +240,8 @@ class LaneFreeParams:
                      "approach_gain", "spacing_error_max_m", "anticipation_s",
                      "follow_margin_m", "lat_gain", "lat_damping", "lateral_clearance_m",
                      "edge_margin_m", "side_buffer_m", "side_buffer_s", "repulsion_gain",
-                     "side_buffer_speed_s", "lookahead_min_m", "edge_lookahead_min_m",
+                     "side_buffer_speed_s", "zipper_slack_m",
+                     "lookahead_min_m", "edge_lookahead_min_m",
                      "edge_lookahead_s", "scan_margin_m", "move_cost", "clear_gain",
                      "clear_cap_m", "nudge_gain", "hysteresis_mps", "order_gain",
                      "bias_speed_low_mps", "urgent_gain_mps", "bias_speed_high_mps",
@@ -296,6 +306,7 @@ class LaneFreeFlocking:
         self._u_prev: dict = {}  # CAV id -> last longitudinal command, m/s^2
         self._v_prev: dict = {}  # other id -> last speed, m/s
         self._moved: set = set()  # others seen moving (a stopped obstacle never is)
+        self._yield_since: dict = {}  # (CAV id, vehicle id) -> time the yield began, s
         self._target: dict = {}  # CAV id -> lateral target d*, m
         self._urgent: dict = {}  # CAV id -> its move pays in speed (announced: others yield)
         self._urgent_now = np.zeros(0, bool)
@@ -595,7 +606,9 @@ class LaneFreeFlocking:
             u_let = self._follow(g_back, v[:, None], sc.accel[:n, None], np.ones_like(g, bool),
                                  sc.v[j], p.coop_time_gap_s, p.coop_time_gap_s)
             u_let = np.where(np.isfinite(u_let), u_let, 0.0)
-            passes = (ds <= 0) & (u_let < -p.yield_decel_mps2)
+            # ... or already too close behind to open the gap the mover needs beside it
+            passes = (ds <= 0) & ((u_let < -p.yield_decel_mps2)
+                                  | (g_back < p.side_buffer_m + p.zipper_slack_m))
             z = mover[:, None] & in_target & ((ds > 0) | passes) & np.isfinite(ds) & ~leader
             u_z = self._follow(g, sc.v[j], sc.accel[j], sc.is_cav[j], v[:, None],
                                p.coop_time_gap_s, p.coop_time_gap_s)
@@ -689,12 +702,41 @@ class LaneFreeFlocking:
                            p.coop_time_gap_s)
         # polite, never harsh: a CAV that would have to brake harder to let a mover in goes
         # on, and the mover falls in behind it (the zipper rule, computed alike by both)
-        ask &= ~(j_cav & (u_c < -p.yield_decel_mps2))
+        ask &= ~(j_cav & ((u_c < -p.yield_decel_mps2)
+                          | (g < p.side_buffer_m + p.zipper_slack_m)))
+        # nothing waits forever: a CAV lets the same vehicle in for at most
+        # yield_timeout_s, then goes on for yield_cooldown_s (a human driver who does not
+        # take the gap, or a mover that cannot move, must not stop the band behind it)
+        ask &= self._patience(obs, sc, j, ask)
         u_c = np.maximum(u_c, -p.yield_decel_mps2)
         u_c = np.where(ask, u_c, np.inf)
         out = np.min(u_c, axis=1)
         self.stats["yields"] += int(np.count_nonzero(np.isfinite(out) & (out < 0)))
         return out
+
+    def _patience(self, obs, sc, j, ask) -> np.ndarray:
+        """``ask`` (N, K) without the pairs a CAV has yielded to too long (memory by ids)."""
+        p = self.params
+        t = float(obs.t)
+        ids_all = list(obs.ids.tolist()) + (list(obs.others_ids.tolist())
+                                            if obs.others_ids is not None else
+                                            [None] * (len(sc.s) - sc.n))
+        keep = ask.copy()
+        seen = set()
+        rows, cols = np.nonzero(ask)
+        for r, c in zip(rows.tolist(), cols.tolist(), strict=True):
+            key = (obs.ids[r], ids_all[j[r, c]])
+            seen.add(key)
+            start = self._yield_since.setdefault(key, t)
+            waited = t - start
+            if waited > p.yield_timeout_s:
+                keep[r, c] = False
+                if waited > p.yield_timeout_s + p.yield_cooldown_s:
+                    self._yield_since[key] = t  # patience again
+        for key in [k for k, t0 in self._yield_since.items()
+                    if k not in seen and t - t0 <= p.yield_timeout_s]:
+            del self._yield_since[key]  # the pair ended before the timeout
+        return keep
 
     def _held(self, obs, sc) -> np.ndarray:
         """Non-CAVs (M,) that have moved, are now slower than 3 m/s and have a vehicle ahead
