@@ -165,6 +165,10 @@ class LaneFreeParams:
         zipper_slack_m: a CAV closer behind a mover than ``side_buffer_m`` plus this cannot
             let it in (the mover needs that gap beside it) and goes on instead, m.
         window: neighbours in road order looked at on each side of a CAV.
+    Comparison:
+        lateral_mode: "free" (the lane-free law) or "fixed": every CAV keeps the lateral
+            position it entered with (rows, or lanes on a lane network): the same
+            longitudinal law without lateral freedom, to isolate the lane-free gain.
     """
 
     time_gap_s: float = 0.55
@@ -219,9 +223,15 @@ class LaneFreeParams:
     zipper_slack_m: float = 0.3
     yield_decel_mps2: float = 2.0
     window: int = 16
+    lateral_mode: str = "free"
 
     def __post_init__(self) -> None:
+        if self.lateral_mode not in ("free", "fixed"):
+            raise ParameterError(f"lateral_mode must be 'free' or 'fixed', got "
+                                 f"{self.lateral_mode!r}")
         for name, value in self.__dict__.items():
+            if name == "lateral_mode":
+                continue
             if name == "window":
                 if isinstance(value, bool) or not isinstance(value, int) or value < 2:
                     raise ParameterError(f"window must be an integer >= 2, got {value!r}")
@@ -423,6 +433,9 @@ class LaneFreeFlocking:
         slot = np.array([self._phase.setdefault(i, _stable_hash(i) % every) for i in ids])
         due = np.isnan(target) | (slot == self._k % every)
         lo, hi = self._band_limits(obs, sc)
+        if p.lateral_mode == "fixed":  # rows (or lanes) fixed where each CAV entered
+            target = np.where(np.isnan(target), sc.d[:n], target)
+            due[:] = False
         if due.any():
             rows = np.flatnonzero(due)
             best, gain, need = self._plan(obs, sc, win, rows, target[rows], lo[rows], hi[rows])
