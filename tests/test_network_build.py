@@ -214,10 +214,22 @@ def test_onramp_offsets_increase_along_the_main_route(cache: Path) -> None:
     assert net.length_m == pytest.approx(400.0, abs=0.05)
     # The ramp's s ends exactly where the main road's downstream lane begins.
     ramp_via = sumo_net.getLane("ramp_0").getOutgoing()[0].getViaLaneID()
-    ramp_end = net.lane_offsets[ramp_via] + sumo_net.getLane(ramp_via).getLength()
+    ramp_end = net.s_of(ramp_via, sumo_net.getLane(ramp_via).getLength())
     assert ramp_end == pytest.approx(net.merge_s_m)
-    assert net.ramp_length_m == pytest.approx(net.merge_s_m - net.lane_offsets["ramp_0"])
+    # ramp_length_m is SUMO's length along the ramp (its lane and junction lane) ...
+    assert net.ramp_length_m == pytest.approx(
+        sumo_net.getLane("ramp_0").getLength() + sumo_net.getLane(ramp_via).getLength())
     assert net.ramp_width_m == pytest.approx(3.4)
+    # ... while s and d place the ramp in the main road's frame: it starts 100 m x cos 8 deg
+    # upstream of the merge node (at 150 m) and its centre lies right of the main road's
+    # right edge (-5.1 m) by more than half its width until the junction.
+    assert net.lane_offsets["ramp_0"] == pytest.approx(150.0 - 100.0 * np.cos(np.radians(8.0)),
+                                                       abs=0.02)
+    pos = np.linspace(0.0, sumo_net.getLane("ramp_0").getLength(), 20)
+    s, d = net.lane_frame(["ramp_0"] * 20, pos, np.zeros(20))
+    assert np.all(np.diff(s) > 0)
+    assert np.all(d < -5.1 - 1.7)
+    assert d[0] == pytest.approx(-100.0 * np.sin(np.radians(8.0)), abs=0.05)
 
 
 @pytest.mark.sumo
@@ -242,7 +254,7 @@ def test_onramp_vehicles_reach_the_end_with_continuous_s(cache: Path, tmp_path: 
                                         ramp_length_m=100.0), {str(cache)!r})
         t.start(["sumo", "-n", str(net.net_file), "-r", {str(rou)!r}, "--no-step-log", "true",
                  "--lateral-resolution", "0.8", "--step-length", "0.1"])
-        prev, worst, lanes, arrived, last_s = {{}}, 0.0, {{}}, [], {{}}
+        prev, worst, lanes, arrived, last_s = {{}}, {{}}, {{}}, [], {{}}
         for _ in range(600):
             t.simulationStep()
             arrived += t.simulation.getArrivedIDList()
@@ -250,15 +262,22 @@ def test_onramp_vehicles_reach_the_end_with_continuous_s(cache: Path, tmp_path: 
                 lane = t.vehicle.getLaneID(v)
                 lanes.setdefault(v, []).append(lane)
                 s = net.s_of(lane, t.vehicle.getLanePosition(v))
-                if v in prev:
-                    worst = max(worst, abs(s - prev[v] - 0.1 * t.vehicle.getSpeed(v)))
+                if v in prev:  # s advance per step relative to the distance driven
+                    ratio = (s - prev[v]) / max(0.1 * t.vehicle.getSpeed(v), 1e-9)
+                    worst.setdefault(v, [1.0, 1.0])
+                    worst[v] = [min(worst[v][0], ratio), max(worst[v][1], ratio)]
                 prev[v] = last_s[v] = s
         print(json.dumps({{"worst": worst, "arrived": arrived, "last_s": last_s,
                           "lanes": {{v: sorted(set(x)) for v, x in lanes.items()}}}}))
         t.close()
     """)
     assert sorted(out["arrived"]) == ["m", "r"]
-    assert out["worst"] < 1e-6
+    # On the main road s advances by exactly v dt; on the ramp by v dt cos(angle to the main
+    # road) (s runs along the main road: 8 deg on the ramp, up to 17 deg on the zipper's
+    # junction lane), never backwards, never faster than the vehicle.
+    assert out["worst"]["m"] == pytest.approx([1.0, 1.0], abs=1e-6)
+    lo, hi = out["worst"]["r"]
+    assert np.cos(np.radians(20.0)) < lo and hi < 1.0 + 1e-6
     for v in ("m", "r"):
         assert out["last_s"][v] > net.length_m - 45.0  # last seen near the road's end
         assert "main_down_0" in out["lanes"][v]

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from cosim.cli.run import positive_float
+from cosim.cli.run import check_out_option, positive_float
 from cosim.errors import CosimError
 
 
@@ -22,6 +22,7 @@ def cmd_plane(ns) -> int:
         kwargs["speed_limit_mps"] = ns.saturation
     if ns.seed is not None and not 0 <= ns.seed < 2**32:
         raise CosimError(f"--seed must be in [0, 2^32), got {ns.seed}")
+    check_out_option(ns.out)
     out = Path(ns.out or Path("outputs") / f"plane_{ns.name}")
     check_output_dir(out, replace=ns.replace, what="plane output folder")
     res = run_plane_scenario(ns.name, seed=ns.seed, duration_s=ns.duration, **kwargs)

@@ -124,6 +124,7 @@ def cmd_run(ns) -> int:
     from cosim.output_dir import check_output_dir, prepare_output_dir, safe_name
     from cosim.sim.runner import run_scenario
 
+    check_out_option(ns.out)
     sc = load_scenario(ns.scenario, run_overrides(ns))
     run = sc.scenario
     out = Path(ns.out) if ns.out else Path("outputs") / safe_name(
@@ -173,6 +174,12 @@ def add_run_parser(sub) -> None:
     r.add_argument("--gui", action="store_true", help="watch the run in sumo-gui (TraCI)")
     r.add_argument("--quiet", action="store_true", help="no progress display")
     r.set_defaults(func=cmd_run)
+
+
+def check_out_option(out: str | None) -> None:
+    """``--out`` given as an empty or blank string: refused (it would mean the default)."""
+    if out is not None and not out.strip():
+        raise ConfigError("--out must name a folder, got an empty string")
 
 
 def positive_float(text: str) -> float:

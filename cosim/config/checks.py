@@ -8,12 +8,25 @@ built network (a user's ``.net.xml`` is only known then). Each failure is one
 
 from __future__ import annotations
 
+import dataclasses
+import typing
 from typing import TYPE_CHECKING
 
 from cosim.errors import ConfigError
 
 if TYPE_CHECKING:
     from cosim.config.scenario import Scenario
+
+#: Most vehicles a run may plan (open roads: inflows x duration; rings: density x length).
+MAX_PLANNED_VEHICLES = 1_000_000
+#: Longest main road a scenario may describe, m.
+MAX_ROAD_LENGTH_M = 1_000_000.0
+#: Most edges of a generated straight road or ring (its length / max_edge_length_m).
+MAX_GENERATED_EDGES = 10_000
+#: Most SUMO sublanes across the road (width / lateral resolution).
+MAX_SUBLANES = 1000
+#: An obstacle closer than this (m) to the joint of two edges sits on the junction.
+JOINT_CLEARANCE_M = 0.5
 
 
 def road_widths_m(sc: Scenario) -> list[float]:
@@ -42,6 +55,8 @@ def road_length_m(sc: Scenario) -> float | None:
 
 def check_scenario(sc: Scenario) -> None:
     """Everything that can be checked from the specs alone."""
+    check_sections(sc)
+    _check_size(sc)
     widths = road_widths_m(sc)
     if widths:
         _check_widths(sc, min(widths))
@@ -51,6 +66,67 @@ def check_scenario(sc: Scenario) -> None:
     _check_obstacle_joints(sc)
 
 
+def check_sections(sc: Scenario) -> None:
+    """Every value of every section against its type: numbers finite, integers integral.
+
+    Scenarios read from TOML are checked key by key on the way in
+    (:mod:`cosim.config.schema`); this catches sections built in Python
+    (``Scenario(demand=DemandSpec(size_classes=((nan, 1.8, 1.0),)))``).
+    """
+    from cosim.config.schema import check_value
+
+    for part in dataclasses.fields(sc):
+        section = getattr(sc, part.name)
+        if not dataclasses.is_dataclass(section):
+            continue
+        hints = typing.get_type_hints(type(section))
+        for f in dataclasses.fields(section):
+            if f.init and f.name in hints:
+                check_value(f"{part.name}.{f.name}", getattr(section, f.name), hints[f.name])
+
+
+def _check_size(sc: Scenario) -> None:
+    """Refuse runs too big to be meant: roads, sublanes, vehicles (each one line)."""
+    net, run, demand = sc.network, sc.scenario, sc.demand
+    length = road_length_m(sc)
+    if length is not None and length > MAX_ROAD_LENGTH_M:
+        raise ConfigError(f"the main road is {length:g} m long: at most "
+                          f"{MAX_ROAD_LENGTH_M:g} m (1000 km)")
+    if net.kind in ("straight", "ring") and net.max_edge_length_m > 0 and length is not None:
+        edges = length / net.max_edge_length_m
+        if edges > MAX_GENERATED_EDGES:
+            raise ConfigError(
+                f"a {length:g} m road in edges of at most network.max_edge_length_m = "
+                f"{net.max_edge_length_m:g} m makes {edges:.0f} edges (at most "
+                f"{MAX_GENERATED_EDGES}): raise network.max_edge_length_m"
+            )
+    widths = road_widths_m(sc)
+    if widths and sc.network.kind != "three_lane":
+        sublanes = max(widths) / run.lateral_resolution_m
+        if sublanes > MAX_SUBLANES:
+            raise ConfigError(
+                f"a {max(widths):g} m wide road at scenario.lateral_resolution_m = "
+                f"{run.lateral_resolution_m:g} m makes {sublanes:.0f} SUMO sublanes (at most "
+                f"{MAX_SUBLANES}): raise the lateral resolution"
+            )
+    if net.kind == "ring":
+        planned = demand.ring_density_vpkm * net.circumference_m / 1000.0
+        what = (f"demand.ring_density_vpkm = {demand.ring_density_vpkm:g} veh/km on "
+                f"{net.circumference_m:g} m")
+    else:
+        ramp = demand.ramp_inflow_vph if net.kind in ("onramp", "file") else 0.0
+        planned = (demand.inflow_vph + ramp) * run.duration_s / 3600.0
+        what = (f"demand.inflow_vph = {demand.inflow_vph + ramp:g} veh/h for "
+                f"{run.duration_s:g} s")
+    if planned > MAX_PLANNED_VEHICLES:
+        raise ConfigError(f"{what} plans {planned:.3g} vehicles (at most "
+                          f"{MAX_PLANNED_VEHICLES:.0e})")
+    longest = max(c[0] for c in demand.size_classes)
+    if length is not None and longest >= length:
+        raise ConfigError(f"demand.size_classes has a {longest:g} m long vehicle: no shorter "
+                          f"than the {length:g} m road")
+
+
 def check_against_network(sc: Scenario, net) -> None:
     """The geometric checks again on the built network ``net`` (a RoadNetwork)."""
     widths = [float(w) for w in net.segment_width]
@@ -58,6 +134,35 @@ def check_against_network(sc: Scenario, net) -> None:
         widths = [w / 3.0 for w in widths]
     _check_widths(sc, min(widths))
     _check_obstacle(sc, float(net.length_m), float(min(widths)), net=net)
+    _check_obstacle_junctions(sc, net)
+    longest = max(c[0] for c in sc.demand.size_classes)
+    if longest >= float(net.length_m):
+        raise ConfigError(f"demand.size_classes has a {longest:g} m long vehicle: no shorter "
+                          f"than the {float(net.length_m):g} m main route")
+
+
+def _check_obstacle_junctions(sc: Scenario, net) -> None:
+    """The obstacle must stand on one edge of the built network, clear of its junctions
+    (SUMO keeps a stopped vehicle's back on the previous lane and reports collisions
+    with it there; a junction lane is no place to park)."""
+    ob = sc.obstacle
+    spans = list(getattr(net, "edge_spans", ()) or ())
+    if not ob.present or len(spans) < 2 and not net.periodic:
+        return
+    back, front = ob.s_m - 0.5 * ob.length_m, ob.s_m + 0.5 * ob.length_m
+    gaps = [(a[0], b[0], a[2], b[1]) for a, b in zip(spans, spans[1:], strict=False)]
+    if net.periodic:  # the junction that closes the ring
+        gaps.append((spans[-1][0], spans[0][0], spans[-1][2], spans[0][1] + net.length_m))
+    length = float(net.length_m)
+    for e0, e1, g0, g1 in gaps:
+        for shift in ((0.0, -length, length) if net.periodic else (0.0,)):
+            lo, hi = g0 + shift - JOINT_CLEARANCE_M, g1 + shift + JOINT_CLEARANCE_M
+            if back < hi and front > lo:
+                raise ConfigError(
+                    f"obstacle ({back:g}..{front:g} m along the road) lies on the junction "
+                    f"of edges {e0!r} and {e1!r} (s = {g0:.2f}..{g1:.2f} m): move "
+                    "obstacle.s_m onto one edge"
+                )
 
 
 def _check_widths(sc: Scenario, narrowest_m: float) -> None:

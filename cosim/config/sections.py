@@ -23,6 +23,10 @@ from cosim.errors import ConfigError
 WORLDS = ("sumo", "road")
 #: Largest seed SUMO accepts (a C int).
 MAX_SEED = 2**31 - 1
+#: SUMO's time resolution: steps are whole multiples of it, s.
+STEP_RESOLUTION_S = 0.001
+#: Most steps of one run (10^7: 11.6 simulated days at 0.1 s).
+MAX_STEPS = 10_000_000
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
 
 
@@ -77,8 +81,22 @@ class RunSpec:
         _finite("scenario", self, "duration_s", "step_length_s", "lateral_resolution_m",
                 "interval_s", low=0.0, strict=True)
         _finite("scenario", self, "warmup_s", low=0.0)
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int):
+            raise ConfigError(f"scenario.seed must be an integer, got {self.seed!r}")
         if not 0 <= self.seed <= MAX_SEED:
             raise ConfigError(f"scenario.seed must be in [0, {MAX_SEED}], got {self.seed}")
+        ticks = self.step_length_s / STEP_RESOLUTION_S
+        if ticks < 1.0 - 1e-9 or abs(ticks - round(ticks)) > 1e-6:
+            raise ConfigError(
+                f"scenario.step_length_s = {self.step_length_s:g} s must be a whole number of "
+                f"milliseconds, at least {STEP_RESOLUTION_S:g} s (SUMO's time resolution)"
+            )
+        if self.duration_s / self.step_length_s > MAX_STEPS:
+            raise ConfigError(
+                f"scenario.duration_s = {self.duration_s:g} s is "
+                f"{self.duration_s / self.step_length_s:.3g} steps of {self.step_length_s:g} s: "
+                f"more than the {MAX_STEPS:.0e} a run may take"
+            )
         if self.step_length_s > self.duration_s:
             raise ConfigError(
                 f"scenario.step_length_s = {self.step_length_s:g} s is longer than the run "

@@ -216,31 +216,31 @@ def _ring_even(
     n: int, length: float, width_road: float, lengths: np.ndarray, widths: np.ndarray,
     density: float, rng: np.random.Generator,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Centres ``(s, d)`` (m) of ``n`` vehicles spread evenly over the ring: a staggered
-    lattice of as many lateral rows as fit (:func:`_ring_slots`); vehicle i (in order of
-    ``s``) in row ``i mod rows``, each row's vehicles equally spaced around the ring (the
-    spacing ``length / n_row``, m, also across the wrap) and the rows staggered by
-    ``length / n`` (m). Rows do not overlap laterally (a lateral gap of at least
-    MIN_GAP_LAT_M), and along a row every bumper gap is at least RING_MIN_GAP_M;
-    otherwise the density is refused, naming the most the ring takes."""
+    """Centres ``(s, d)`` (m) of ``n`` vehicles spread evenly over the ring, in as many
+    lateral rows as fit (:func:`_ring_slots`; rows do not overlap laterally: a lateral gap
+    of at least MIN_GAP_LAT_M).
+
+    First choice, a staggered lattice: vehicles equally spaced in ``s`` (``length / n``,
+    m), taking the rows in turn in blocks (``0, 1, ..., b-1``) of nearly equal sizes
+    ``b <= rows``, so that two vehicles of one row are at least a block apart, across the
+    wrap too (``n`` a multiple of the rows: every block holds every row). When that leaves
+    a bumper gap in a row below RING_MIN_GAP_M (near the most the ring holds), each row's
+    vehicles are spaced equally around the ring instead (``length / n_row``), the rows
+    staggered. If that does not fit either, the density is refused, naming the most the
+    ring takes (:func:`ring_max_vehicles`)."""
     m = _ring_slots(width_road, float(widths.max()))
     spacing = length / n
-    rows = np.arange(n) % m
-    per_row = np.bincount(rows, minlength=m)  # vehicles of each row
-    index_in_row = np.arange(n) // m
-    if per_row.min() == per_row.max():  # n a multiple of the rows: one lattice
-        s = rng.uniform(0.0, spacing) + spacing * np.arange(n)
-    else:
-        s = (rng.uniform(0.0, spacing) + spacing * rows
-             + index_in_row * (length / per_row[rows]))
-    # bumper gaps along each row (consecutive members, the last one to the first)
-    for k in range(min(m, n)):
-        members = np.flatnonzero(rows == k)
-        if len(members) < 2:
-            continue
-        ahead = np.roll(members, -1)
-        gap = length / len(members) - 0.5 * (lengths[members] + lengths[ahead])
-        if gap.min() < RING_MIN_GAP_M - 1e-9:
+    u = rng.uniform(0.0, spacing)
+    n_blocks = -(-n // m)  # ceil: as few blocks, as many rows per block, as possible
+    starts = (np.arange(n_blocks + 1) * n) // n_blocks  # nearly equal block sizes
+    block = np.repeat(np.arange(n_blocks), np.diff(starts))
+    rows = np.arange(n) - starts[block]
+    s = u + spacing * np.arange(n)
+    if not _rows_fit(s, rows, lengths, length, m):
+        rows = np.arange(n) % m
+        per_row = np.bincount(rows, minlength=m)
+        s = u + spacing * rows + (np.arange(n) // m) * (length / per_row[rows])
+        if not _rows_fit(s, rows, lengths, length, m):
             n_max = ring_max_vehicles(length, width_road, float(lengths.max()),
                                       float(widths.max()))
             raise ConfigError(
@@ -256,6 +256,21 @@ def _ring_even(
     room = np.maximum(0.5 * (slot_w - widths - MIN_GAP_LAT_M), 0.0)
     d = centres + rng.uniform(-1.0, 1.0, size=n) * room
     return s, d
+
+
+def _rows_fit(s: np.ndarray, rows: np.ndarray, lengths: np.ndarray, length: float,
+              m: int) -> bool:
+    """Every bumper gap between consecutive vehicles of one row (centres ``s`` increasing,
+    m; the last to the first across the wrap) is at least RING_MIN_GAP_M."""
+    for k in range(m):
+        members = np.flatnonzero(rows == k)
+        if len(members) < 2:
+            continue
+        ahead = np.roll(members, -1)
+        ds = np.mod(s[ahead] - s[members], length)
+        if (ds - 0.5 * (lengths[members] + lengths[ahead])).min() < RING_MIN_GAP_M - 1e-9:
+            return False
+    return True
 
 
 def _ring_random(

@@ -105,6 +105,7 @@ class SumoWorld:
         self._static: dict[str, tuple[float, float, bool, float]] = {}
         self._lane_info: dict[str, tuple[float, float, bool]] = {}  # offset, lane d, on main
         self._lane_of: dict[str, str] = {}
+        self._pos_of: dict[str, float] = {}
         self.departed_now: list[str] = []
         self.arrived_now: list[str] = []
         self.controlled: set[str] = set()
@@ -203,9 +204,9 @@ class SumoWorld:
                        length, width, off, ld, main, cav, desired)
         self._lane_of = dict(zip(ids, lane, strict=True))
         arr = np.array(rows, dtype=float).reshape(n, 11)
-        s_front = arr[:, 6] + arr[:, 0]
-        if self.period is not None:
-            s_front = np.mod(s_front, self.period)
+        self._pos_of = dict(zip(ids, arr[:, 0].tolist(), strict=True))
+        # (lane, position, lateral position) -> (s, d): the lanes' real geometry
+        s_front, d_front = self.net.lane_frame(lane, arr[:, 0], arr[:, 1])
         s = s_front - 0.5 * arr[:, 4]
         if self.period is not None:
             s = np.mod(s, self.period)
@@ -213,7 +214,7 @@ class SumoWorld:
         is_static = np.zeros(n, dtype=bool)
         if self.obstacle_id is not None and self.obstacle_id in self._lane_of:
             is_static[ids.index(self.obstacle_id)] = True
-        return RoadSnapshot(ids, s, s_front, arr[:, 1] + arr[:, 7], arr[:, 2], arr[:, 3],
+        return RoadSnapshot(ids, s, s_front, d_front, arr[:, 2], arr[:, 3],
                             arr[:, 4], arr[:, 5], arr[:, 9] > 0, on_main, is_static,
                             arr[:, 10])
 
@@ -232,11 +233,13 @@ class SumoWorld:
               v_lat_next: np.ndarray) -> None:
         """Command next speeds (m/s) and lateral positions (road frame, m) of CAVs."""
         veh = self.ts.vehicle
-        lane_d = self.net.lane_d
         lanes = [self._lane_of[i] for i in ids]
-        for vid, v, d, lane, vl in zip(ids, v_next, d_next, lanes, v_lat_next, strict=True):
+        pos = np.fromiter((self._pos_of[i] for i in ids), dtype=float, count=len(ids))
+        # road-frame d -> lateral lane position where the vehicle will be after the step
+        lats = self.net.lateral_lane_position(lanes, pos + np.asarray(v_next) * self.dt, d_next)
+        for vid, v, lat, vl in zip(ids, v_next, lats.tolist(), v_lat_next, strict=True):
             veh.setSpeed(vid, float(v))
-            veh.setLateralLanePosition(vid, float(d - lane_d.get(lane, 0.0)))
+            veh.setLateralLanePosition(vid, lat)
             self.v_lat_state[vid] = float(vl)
 
     def collisions(self) -> list[tuple[str, str]]:

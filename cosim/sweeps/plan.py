@@ -44,7 +44,6 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -167,11 +166,10 @@ def resolve_sweep_file(arg: str | Path) -> Path:
 
 def load_sweep(path: str | Path, smoke: bool = False) -> SweepPlan:
     """Read a sweep file (path or built-in name), validate every grid point, return the plan."""
+    from cosim.config.scenario import read_toml
+
     path = resolve_sweep_file(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"{path}: not valid TOML: {exc}") from None
+    data = read_toml(path)  # unreadable, not UTF-8, not TOML: one ConfigError line
     try:
         return sweep_from_dict(data, source=path, smoke=smoke)
     except ConfigError as exc:

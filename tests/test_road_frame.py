@@ -1,0 +1,457 @@
+"""The road frame on user networks: (lane, lane position, lateral position) <-> (s, d)
+from the lanes' real geometry (cosim/road/frame.py).
+
+The example networks are the plain-XML sources in networks/examples/, built here with
+netconvert's defaults (lanes hang to the right of the drawn edge, so after a width change
+the narrow lane is not centred on the wide one):
+
+* width_change: 10.2 m narrowing to 6.8 m on a straight road;
+* curve: a 90 degree bend of radius 120 m drawn as two arcs, straight approaches;
+* multi_edge: five edges with kinks of +6 and -10 degrees and widths 10.2 / 8.5 m;
+* the built-in on-ramp (a 3.4 m ramp at 8 degrees joining a 10.2 m road at a zipper).
+
+The SUMO checks run each network in its own process (libsumo: one simulation per
+process; this file is also the script: ``python tests/test_road_frame.py CASE CACHE``
+prints ``RESULT <json>``): every vehicle, every step, SUMO's own x, y
+(``vehicle.getPosition``) against our (s, d) mapped back to x, y through the frame's
+reference line; a third of the vehicles are moved across the road by commands in the
+road frame (``lateral_lane_position`` at the position they reach in the step), and the
+d they reach is compared with the command.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+if str(REPO) not in sys.path:  # run as a script from a subprocess
+    sys.path.insert(0, str(REPO))
+
+from cosim.errors import NetworkError  # noqa: E402
+from cosim.road.frame import PROFILE_TOL_M, load_road_network  # noqa: E402
+
+EXAMPLES = REPO / "networks" / "examples"
+ROUTES = {
+    "width_change": ("wide", "narrow"),
+    "curve": ("in", "bend1", "bend2", "out"),
+    "multi_edge": ("e0", "e1", "e2", "e3", "e4"),
+}
+#: Agreement asked of the frame with SUMO's x, y, m.
+TOL_M = 0.05
+
+
+def build_example(name: str, folder: Path, edg_text: str | None = None) -> Path:
+    """netconvert (defaults) on networks/examples/NAME.{nod,edg}.xml -> FOLDER/NAME.net.xml."""
+    from cosim.sumo.binaries import netconvert_binary
+
+    folder.mkdir(parents=True, exist_ok=True)
+    edg = EXAMPLES / f"{name}.edg.xml"
+    if edg_text is not None:
+        edg = folder / f"{name}.edg.xml"
+        edg.write_text(edg_text)
+    out = folder / f"{name}.net.xml"
+    proc = subprocess.run(
+        [str(netconvert_binary()), "-n", str(EXAMPLES / f"{name}.nod.xml"), "-e", str(edg),
+         "-o", str(out)], capture_output=True, text=True, check=False)
+    assert proc.returncode == 0, proc.stderr
+    return out
+
+
+@pytest.fixture(scope="module")
+def nets(tmp_path_factory) -> dict[str, Path]:
+    folder = tmp_path_factory.mktemp("example_nets")
+    return {name: build_example(name, folder) for name in ROUTES}
+
+
+def frame(nets, name):
+    return load_road_network(nets[name], kind="file", main_route=ROUTES[name])
+
+
+# --------------------------------------------------------------------------------------
+# The frame's geometry (no SUMO run)
+# --------------------------------------------------------------------------------------
+
+
+def test_example_sources_are_package_data_and_documented():
+    names = sorted(p.name for p in EXAMPLES.glob("*.xml"))
+    assert names == sorted(f"{n}.{k}.xml" for n in ROUTES for k in ("nod", "edg"))
+    readme = (REPO / "networks" / "README.md").read_text()
+    for name in ROUTES:
+        assert f"examples/{name}" in readme
+
+
+def test_width_change_keeps_the_left_edge_and_offsets_the_narrow_lane(nets):
+    """netconvert's default hangs both lanes from the drawn line (their left border): the
+    reference line runs on along the wide lane's centre, the narrow lane's centre lies
+    1.7 m left of it, the left edge stays at +5.1 m and the right edge steps from -5.1 m
+    to -1.7 m across the junction (3 m long), never wider than the lanes."""
+    net = frame(nets, "width_change")
+    assert net.lane_d["wide_0"] == pytest.approx(0.0, abs=1e-9)
+    assert net.lane_d["narrow_0"] == pytest.approx(1.7, abs=0.01)
+    assert net.width_m == pytest.approx(10.2)
+    (_, w0, w1), (_, n0, n1) = net.edge_spans
+    s = np.linspace(0.0, net.length_m, 4001)
+    right, left = net.edges_at(s)
+    np.testing.assert_allclose(left, 5.1, atol=1e-6)
+    assert np.all(right[s <= w1] == pytest.approx(-5.1, abs=1e-6))
+    assert np.all(right[s >= n0] == pytest.approx(-1.7, abs=0.01))
+    inside = (s > w1) & (s < n0)
+    assert np.all(np.diff(right[inside]) >= -1e-9)  # a taper, not a jump
+    # pieces are fine: no edge moves by more than the tolerance within one piece
+    prof = net.profile()
+    assert np.all(np.abs(np.diff(prof.right)) <= 3 * PROFILE_TOL_M + 1e-9)
+    assert len(prof.s0) < 400
+    # s as SUMO measures it: lane lengths plus the junction lane
+    sumo_len = 198.5 + 3.58 + 198.5
+    assert net.length_m == pytest.approx(sumo_len, abs=0.02)
+
+
+def test_curve_frame_is_the_lane_centre_line(nets):
+    """One lane, 10.2 m, through a 90 degree bend: the reference line is the lane's centre
+    line (junction lanes included), so d is SUMO's lateral position and s advances by
+    lane metres, and the road is +-5.1 m everywhere."""
+    net = frame(nets, "curve")
+    lanes = [f"{e}_0" for e in ROUTES["curve"]]
+    rng = np.random.default_rng(3)
+    lane = [lanes[i] for i in rng.integers(0, 4, 500)]
+    pos = rng.uniform(0.0, 90.0, 500)
+    lat = rng.uniform(-5.0, 5.0, 500)
+    s, d = net.lane_frame(lane, pos, lat)
+    np.testing.assert_allclose(d, lat, atol=1e-9)
+    offs = np.array([net.lane_offsets[x] for x in lane])
+    np.testing.assert_allclose(s, offs + pos, atol=1e-6)
+    right, left = net.edges_at(np.linspace(0.0, net.length_m, 500))
+    np.testing.assert_allclose(right, -5.1, atol=1e-3)
+    np.testing.assert_allclose(left, 5.1, atol=1e-3)
+    spans = [x[1:] for x in net.edge_spans]
+    assert all(a1 <= b0 for (_, a1), (b0, _) in zip(spans, spans[1:], strict=False))
+
+
+def test_multi_edge_frame(nets):
+    """Kinks and width changes: the 8.5 m edges lie 0.85 m left of the line (their left
+    border is the wide edges' left border), s increases edge after edge."""
+    net = frame(nets, "multi_edge")
+    for e, d0 in (("e0", 0.0), ("e1", 0.0), ("e2", 0.85), ("e3", 0.85), ("e4", 0.0)):
+        assert net.lane_d[f"{e}_0"] == pytest.approx(d0, abs=0.02)
+    starts = [s0 for _, s0, _ in net.edge_spans]
+    assert starts == sorted(starts)
+    for _, s0, s1 in net.edge_spans:
+        right, left = net.edges_at(np.array([0.5 * (s0 + s1)]))
+        assert left[0] == pytest.approx(5.1, abs=0.02)
+        assert right[0] in (pytest.approx(-5.1, abs=0.02), pytest.approx(-3.4, abs=0.02))
+
+
+@pytest.mark.parametrize("name", list(ROUTES))
+def test_inverse_mapping_round_trips(nets, name):
+    """lateral_lane_position inverts lane_frame at a fixed position (every lane of the
+    routes, junction lanes included), and xy_of(lane_frame) is sumolib's own position of
+    the lane point (SUMO's geometryPositionAtOffset: shape scaled to the lane's length,
+    offset along the segment's normal)."""
+    import sumolib
+
+    net = frame(nets, name)
+    sn = sumolib.net.readNet(str(nets[name]), withInternal=True)
+    lanes = [x for x in net.lane_d]
+    rng = np.random.default_rng(7)
+    lane = [lanes[i] for i in rng.integers(0, len(lanes), 400)]
+    length = np.array([sn.getLane(x).getLength() for x in lane])
+    pos = rng.uniform(0.0, 1.0, 400) * length
+    lat = rng.uniform(-3.0, 3.0, 400)
+    s, d = net.lane_frame(lane, pos, lat)
+    back = net.lateral_lane_position(lane, pos, d)
+    # exact where a segment of the reference line holds the point's foot; in the outer
+    # corner of a bend of the line (the multi-edge route's smoothed junctions: 0.2 degrees
+    # per point) the two directions pick neighbouring segments: d x 0.2 degrees apart
+    np.testing.assert_allclose(back, lat, atol=1e-9 if name != "multi_edge" else 1e-3)
+    ours = net.xy_of(s, d)
+    ref = np.array([_sumolib_xy(sn.getLane(x), p, la) for x, p, la in zip(lane, pos, lat,
+                                                                            strict=True)])
+    err = np.hypot(*(ours - ref).T)
+    assert err.max() < TOL_M, (err.max(), lane[int(np.argmax(err))])
+
+
+def _sumolib_xy(lane, pos: float, lat: float) -> tuple[float, float]:
+    """SUMO's point of (pos, lat) on a lane, with sumolib's geometry helpers."""
+    from sumolib import geomhelper
+
+    shape = lane.getShape()
+    geo = geomhelper.polyLength(shape)
+    g = pos * geo / lane.getLength()
+    x, y = geomhelper.positionAtShapeOffset(shape, g)
+    seen = 0.0
+    for a, b in zip(shape, shape[1:], strict=False):
+        seg = math.dist(a, b)
+        if seen + seg >= g or b == shape[-1]:
+            nx, ny = -(b[1] - a[1]) / seg, (b[0] - a[0]) / seg
+            return x + lat * nx, y + lat * ny
+        seen += seg
+    raise AssertionError("unreachable")
+
+
+def test_generated_networks_keep_s_offset_plus_pos_and_d_lat(tmp_path):
+    """On the networks cosim builds (every edge centred) nothing changes: s = offset +
+    lane position and d = lateral lane position, on the ring across its seam too."""
+    from cosim.road.build import build_network
+    from cosim.road.spec import NetworkSpec
+
+    rng = np.random.default_rng(1)
+    for spec in (NetworkSpec(kind="ring", circumference_m=500.0),
+                 NetworkSpec(kind="straight", length_m=600.0),
+                 NetworkSpec(kind="varying_width", width_profile=((100.0, 10.2), (80.0, 6.8)))):
+        net = build_network(spec, tmp_path)
+        lanes = [f"{e}_0" for e in net.main_route]
+        lane = [lanes[i] for i in rng.integers(0, len(lanes), 300)]
+        pos = rng.uniform(0.0, 40.0, 300)
+        lat = rng.uniform(-3.0, 3.0, 300)
+        s, d = net.lane_frame(lane, pos, lat)
+        want = np.array([net.lane_offsets[x] for x in lane]) + pos
+        if net.periodic:
+            want = np.mod(want, net.length_m)
+        np.testing.assert_allclose(s, want, atol=1e-6)
+        np.testing.assert_allclose(d, lat, atol=1e-9)
+        # off the routes: no s, d is the lateral position
+        s2, d2 = net.lane_frame(["nowhere_0"], np.array([1.0]), np.array([0.4]))
+        assert np.isnan(s2[0]) and d2[0] == 0.4
+
+
+# --------------------------------------------------------------------------------------
+# What the frame refuses
+# --------------------------------------------------------------------------------------
+
+
+def _edited(nets, name: str, tmp_path: Path, old: str, new: str) -> Path:
+    text = nets[name].read_text()
+    assert old in text
+    out = tmp_path / f"{name}_edited.net.xml"
+    out.write_text(text.replace(old, new, 1))
+    return out
+
+
+def test_refuses_a_lane_that_runs_backwards(nets, tmp_path):
+    path = _edited(nets, "width_change", tmp_path, 'shape="201.50,-3.40 400.00,-3.40"',
+                   'shape="400.00,-3.40 201.50,-3.40"')
+    with pytest.raises(NetworkError, match="narrow_0.*(backwards|degrees)") as exc:
+        load_road_network(path, kind="file", main_route=ROUTES["width_change"])
+    assert "\n" not in str(exc.value)
+
+
+def test_refuses_lanes_that_cross(tmp_path):
+    edg = ('<edges>\n  <edge id="wide" from="a" to="b" numLanes="2" width="3.40" speed="30"/>\n'
+           '  <edge id="narrow" from="b" to="c" numLanes="2" width="3.40" speed="30"/>\n'
+           '</edges>\n')
+    path = build_example("width_change", tmp_path, edg_text=edg)
+    text = path.read_text()
+    import re
+
+    l0 = re.search(r'(<lane id="narrow_0"[^>]*shape=")([^"]*)"', text)
+    l1 = re.search(r'(<lane id="narrow_1"[^>]*shape=")([^"]*)"', text)
+    a, b = l0.group(2).split(), l1.group(2).split()
+    # narrow_0 runs from the right to the left of narrow_1: the two lanes cross
+    text = text.replace(l0.group(0), f'{l0.group(1)}{a[0]} {b[1]}"')
+    text = text.replace(l1.group(0), f'{l1.group(1)}{b[0]} {a[1]}"')
+    path.write_text(text)
+    with pytest.raises(NetworkError, match="cross"):
+        load_road_network(path, kind="file", main_route=ROUTES["width_change"])
+
+
+def test_refuses_a_ramp_at_right_angles(tmp_path):
+    nod = ('<nodes>\n  <node id="a" x="0" y="0" type="priority"/>\n'
+           '  <node id="b" x="200" y="0" type="priority"/>\n'
+           '  <node id="c" x="400" y="0" type="priority"/>\n'
+           '  <node id="r" x="200" y="-150" type="priority"/>\n</nodes>\n')
+    edg = ('<edges>\n  <edge id="up" from="a" to="b" numLanes="1" width="10.2" speed="30"/>\n'
+           '  <edge id="down" from="b" to="c" numLanes="1" width="10.2" speed="30"/>\n'
+           '  <edge id="side" from="r" to="b" numLanes="1" width="3.4" speed="30"/>\n'
+           '</edges>\n')
+    (tmp_path / "t.nod.xml").write_text(nod)
+    (tmp_path / "t.edg.xml").write_text(edg)
+    from cosim.sumo.binaries import netconvert_binary
+
+    subprocess.run([str(netconvert_binary()), "-n", str(tmp_path / "t.nod.xml"), "-e",
+                    str(tmp_path / "t.edg.xml"), "-o", str(tmp_path / "t.net.xml")],
+                   check=True, capture_output=True)
+    with pytest.raises(NetworkError, match="side_0.*degrees"):
+        load_road_network(tmp_path / "t.net.xml", kind="file", main_route=("up", "down"),
+                          ramp_route=("side", "down"))
+    # the same network without the ramp is fine
+    net = load_road_network(tmp_path / "t.net.xml", kind="file", main_route=("up", "down"))
+    assert net.length_m > 390.0
+
+
+def test_refuses_route_edges_that_do_not_connect_or_repeat(nets):
+    with pytest.raises(NetworkError, match="not connected"):
+        load_road_network(nets["multi_edge"], kind="file", main_route=("e0", "e2"))
+    with pytest.raises(NetworkError, match="twice"):
+        load_road_network(nets["multi_edge"], kind="file", main_route=("e0", "e1", "e0"))
+
+
+def test_an_edge_without_lanes_is_named(nets, tmp_path):
+    import re
+
+    text = nets["width_change"].read_text()
+    text = re.sub(r'(<edge id="narrow"[^>]*>)\s*<lane[^>]*/>', r"\1", text, count=1)
+    path = tmp_path / "nolane.net.xml"
+    path.write_text(text)
+    with pytest.raises(NetworkError, match="edge 'narrow' has no <lane>"):
+        load_road_network(path, kind="file", main_route=ROUTES["width_change"])
+
+
+# --------------------------------------------------------------------------------------
+# Against SUMO (one subprocess per network)
+# --------------------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def sumo_env(tmp_path_factory) -> dict:
+    env = dict(os.environ)
+    env["COSIM_NETWORK_CACHE"] = str(tmp_path_factory.mktemp("network_cache"))
+    return env
+
+
+def _case(name: str, env: dict, folder: Path) -> dict:
+    proc = subprocess.run([sys.executable, __file__, name, str(folder)], capture_output=True,
+                          text=True, env=env, timeout=300, check=False)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    line = [x for x in proc.stdout.splitlines() if x.startswith("RESULT ")][-1]
+    return json.loads(line[len("RESULT "):])
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("name", [*ROUTES, "onramp"])
+def test_frame_agrees_with_sumo_positions(name, sumo_env, tmp_path):
+    """Every vehicle, every step: SUMO's x, y and our (s, d) mapped back to x, y agree to
+    0.05 m (measured: 1e-13 m where the lanes are the reference line, <= 0.01 m on the
+    kinked multi-edge route's junction lanes); commanded d's are reached to 0.05 m."""
+    r = _case(name, sumo_env, tmp_path)
+    assert r["n"] > 3000 and r["on_junction_lanes"] > 5  # vehicles crossed the junctions
+    assert r["worst_xy_m"] < TOL_M, r["where"]
+    assert r["n_commanded"] > 500
+    assert r["worst_command_m"] < TOL_M
+    # our road edges are SUMO's lane borders: a body reaches equally far beyond both
+    assert r["worst_edge_m"] < TOL_M, r["where_edge"]
+    if name == "onramp":
+        # ramp vehicles come out in the main road's frame: right of its right edge
+        assert r["ramp_samples"] > 200
+        assert r["ramp_max_d_minus_right_m"] < -0.5
+    if name == "width_change":
+        assert r["seen_on"]["narrow_0"] > 500 and r["seen_on"][":b_0_0"] > 20
+
+
+# --------------------------------------------------------------------------------------
+# The subprocess
+# --------------------------------------------------------------------------------------
+
+
+def _sumo_case(name: str, folder: Path, steps: int = 400, dt: float = 0.1) -> dict:
+    import libsumo as t
+
+    if name == "onramp":
+        from cosim.road.build import build_network
+        from cosim.road.spec import NetworkSpec
+
+        rn = build_network(NetworkSpec(kind="onramp", length_m=600.0, merge_position_m=300.0,
+                                       ramp_length_m=200.0))
+        net_file, route, ramp = rn.net_file, rn.main_route, rn.ramp_route
+    else:
+        net_file, route, ramp = build_example(name, folder), ROUTES[name], None
+        rn = load_road_network(net_file, kind="file", main_route=route)
+    rng = np.random.default_rng(1)
+    rou = folder / f"{name}.rou.xml"
+    lines = ["<routes>",
+             '  <vType id="car" length="4.5" width="1.8" laneChangeModel="SL2015" '
+             'latAlignment="arbitrary" minGapLat="0.3"/>',
+             f'  <route id="main" edges="{" ".join(route)}"/>']
+    if ramp:
+        lines.append(f'  <route id="ramp" edges="{" ".join(ramp)}"/>')
+    w_main = float(rn.width_at(np.array([1.0]))[0])
+    for i in range(40):
+        for r in ("main", "ramp") if ramp else ("main",):
+            w = w_main if r == "main" else rn.ramp_width_m
+            lat = rng.uniform(-0.5 * w + 1.0, 0.5 * w - 1.0)
+            lines.append(f'  <vehicle id="{r}{i}" type="car" route="{r}" depart="{i:.1f}" '
+                         f'departSpeed="max" departPosLat="{lat:.2f}"/>')
+    rou.write_text("\n".join([*lines, "</routes>"]) + "\n")
+    t.start(["sumo", "-n", str(net_file), "-r", str(rou), "--no-step-log", "true",
+             "--lateral-resolution", "0.8", "--step-length", str(dt),
+             "--collision.action", "none", "--no-warnings", "true"])
+    out = {"n": 0, "worst_xy_m": 0.0, "where": None, "on_junction_lanes": 0,
+           "worst_command_m": 0.0, "n_commanded": 0, "worst_edge_m": 0.0,
+           "ramp_samples": 0, "ramp_max_d_minus_right_m": -math.inf, "seen_on": {}}
+    commanded: dict[str, tuple] = {}
+    widths = {f"{e}_0": t.lane.getWidth(f"{e}_0") for e in route}
+    for step in range(steps):
+        t.simulationStep()
+        ids = list(t.vehicle.getIDList())
+        if not ids:
+            continue
+        lanes = [t.vehicle.getLaneID(v) for v in ids]
+        pos = np.array([t.vehicle.getLanePosition(v) for v in ids])
+        lat = np.array([t.vehicle.getLateralLanePosition(v) for v in ids])
+        xy = np.array([t.vehicle.getPosition(v) for v in ids])
+        s, d = rn.lane_frame(lanes, pos, lat)
+        err = np.hypot(*(rn.xy_of(s, d) - xy).T)
+        i = int(np.argmax(err))
+        if err[i] > out["worst_xy_m"]:
+            out["worst_xy_m"] = float(err[i])
+            out["where"] = [ids[i], lanes[i], float(pos[i]), float(lat[i])]
+        out["n"] += len(ids)
+        out["on_junction_lanes"] += sum(x.startswith(":") for x in lanes)
+        for x in lanes:
+            out["seen_on"][x] = out["seen_on"].get(x, 0) + 1
+        for j, v in enumerate(ids):
+            if v in commanded:
+                e = abs(d[j] - commanded[v][0])
+                if e > out["worst_command_m"]:
+                    out["worst_command_m"] = e
+                    out["where_command"] = [v, lanes[j], float(pos[j]), *commanded[v][1:]]
+                out["n_commanded"] += 1
+        right, left = rn.edges_at(s)
+        # our road edges against SUMO's lane borders, for vehicles on the main road's
+        # lanes: how far the body reaches beyond the edge, in our frame and in SUMO's
+        on_lane = np.array([x in widths for x in lanes], dtype=bool)
+        if on_lane.any():
+            half = np.array([widths.get(x, 0.0) for x in lanes])[on_lane] / 2.0
+            ours = np.maximum(right[on_lane] - (d[on_lane] - 0.9),
+                              (d[on_lane] + 0.9) - left[on_lane])
+            theirs = np.maximum(-half - (lat[on_lane] - 0.9), (lat[on_lane] + 0.9) - half)
+            e = np.abs(ours - theirs)
+            if e.max() > out["worst_edge_m"]:
+                out["worst_edge_m"] = float(e.max())
+                j = np.flatnonzero(on_lane)[int(np.argmax(e))]
+                out["where_edge"] = [ids[j], lanes[j], float(pos[j]), float(lat[j])]
+        if ramp:
+            on_ramp = np.array([x == f"{ramp[0]}_0" for x in lanes], dtype=bool)
+            if on_ramp.any():
+                out["ramp_samples"] += int(on_ramp.sum())
+                out["ramp_max_d_minus_right_m"] = max(out["ramp_max_d_minus_right_m"],
+                                                      float((d - right)[on_ramp].max()))
+        # a third of the main vehicles: a lateral target sweeping across the road, set in
+        # the road frame at the position each reaches in the step
+        commanded = {}
+        for j, v in enumerate(ids):
+            if not (v.startswith("main") and int(v[4:]) % 3 == 0):
+                continue
+            t.vehicle.setLaneChangeMode(v, 0)
+            t.vehicle.setSpeedMode(v, 0)  # as our CAVs: x += v_next dt exactly
+            v_next = t.vehicle.getSpeed(v)
+            t.vehicle.setSpeed(v, v_next)
+            frac = 0.5 + 0.45 * math.sin(0.05 * step + int(v[4:]))
+            target = right[j] + 0.9 + frac * (left[j] - right[j] - 1.8)
+            la = rn.lateral_lane_position([lanes[j]], pos[j:j + 1] + v_next * dt,
+                                          np.array([target]))
+            t.vehicle.setLateralLanePosition(v, float(la[0]))
+            commanded[v] = (target, lanes[j], float(pos[j]), float(la[0]))
+    t.close()
+    return out
+
+
+if __name__ == "__main__":
+    print("RESULT " + json.dumps(_sumo_case(sys.argv[1], Path(sys.argv[2]))))
