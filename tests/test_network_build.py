@@ -219,7 +219,7 @@ def test_onramp_offsets_increase_along_the_main_route(cache: Path) -> None:
     # ramp_length_m is SUMO's length along the ramp (its lane and junction lane) ...
     assert net.ramp_length_m == pytest.approx(
         sumo_net.getLane("ramp_0").getLength() + sumo_net.getLane(ramp_via).getLength())
-    assert net.ramp_width_m == pytest.approx(3.4)
+    assert net.ramp_width_m == pytest.approx(spec.width_m)  # default: as wide as the road
     # ... while s and d place the ramp in the main road's frame: it starts 100 m x cos 8 deg
     # upstream of the merge node (at 150 m) and its centre lies right of the main road's
     # right edge (-5.1 m) by more than half its width until the junction.

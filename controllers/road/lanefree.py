@@ -165,6 +165,9 @@ class LaneFreeParams:
         zipper_slack_m: a CAV closer behind a mover than ``side_buffer_m`` plus this cannot
             let it in (the mover needs that gap beside it) and goes on instead, m.
         window: neighbours in road order looked at on each side of a CAV.
+        entry_reach_m: a vehicle outside the road within this distance of its edge (about
+            to merge from an on-ramp) counts as on the road at its nearest inside
+            position, m.
     Comparison:
         lateral_mode: "free" (the lane-free law) or "fixed": every CAV keeps the lateral
             position it entered with (rows, or lanes on a lane network): the same
@@ -223,6 +226,7 @@ class LaneFreeParams:
     zipper_slack_m: float = 0.3
     yield_decel_mps2: float = 2.0
     window: int = 16
+    entry_reach_m: float = 6.0
     lateral_mode: str = "free"
 
     def __post_init__(self) -> None:
@@ -255,7 +259,7 @@ class LaneFreeParams:
                      "edge_lookahead_s", "scan_margin_m", "move_cost", "clear_gain",
                      "clear_cap_m", "nudge_gain", "hysteresis_mps", "order_gain",
                      "bias_speed_low_mps", "urgent_gain_mps", "bias_speed_high_mps",
-                     "queue_speed_mps", "queue_hysteresis",
+                     "queue_speed_mps", "queue_hysteresis", "entry_reach_m",
                      "cut_in_gap_m", "cut_in_speed_margin_mps"):
             if getattr(self, name) < 0:
                 raise ParameterError(f"{name} must be >= 0, got {getattr(self, name)!r}")
@@ -378,9 +382,10 @@ class LaneFreeFlocking:
         a_other = np.where(np.isfinite(v_prev), (op[:, 0] - v_prev) / obs.dt, 0.0)
         length = obs.length if obs.length is not None else np.full(n, 4.5)
         width = obs.width if obs.width is not None else np.full(n, 1.8)
+        od = self._entering(obs, oq, ow) if len(oq) else oq[:, 1]
         return _Scene(
             s=np.concatenate([obs.q[:, 0], oq[:, 0]]),
-            d=np.concatenate([obs.q[:, 1], oq[:, 1]]),
+            d=np.concatenate([obs.q[:, 1], od]),
             v=np.concatenate([obs.p[:, 0], op[:, 0]]),
             v_lat=np.concatenate([obs.p[:, 1], op[:, 1]]),
             length=np.concatenate([length, ol]),
@@ -393,6 +398,23 @@ class LaneFreeFlocking:
                                              zip(oids, op[:, 0], strict=True)], dtype=bool)]),
             n=n,
         )
+
+    def _entering(self, obs: Observation, oq: np.ndarray, ow: np.ndarray) -> np.ndarray:
+        """Lateral positions (M,) m of the sensed vehicles as the law uses them: a vehicle
+        still outside the road but within ``entry_reach_m`` of its edge (on an on-ramp
+        about to merge) is taken to be on the road already, at its nearest inside
+        position: CAVs behind it there keep their gap to it, CAVs beside it make room."""
+        p = self.params
+        d = oq[:, 1].copy()
+        if obs.road is None:
+            return d
+        edges = obs.road.edges(oq[:, 0])
+        lo = edges[:, 0] + 0.5 * ow + 0.1
+        hi = edges[:, 1] - 0.5 * ow - 0.1
+        out = np.maximum(lo - d, d - hi)  # > 0: outside by this much
+        merging = (out > 0) & (out < p.entry_reach_m)
+        d[merging] = np.clip(d[merging], lo[merging], np.maximum(lo, hi)[merging])
+        return d
 
     def _window(self, sc: _Scene, period: float | None) -> dict:
         """Neighbours of each CAV in road order: index ``j`` (N, K), ``ds`` (N, K) m (wrapped

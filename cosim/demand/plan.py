@@ -113,6 +113,9 @@ def _open_stream(
     is_cav, cls, speed = _draw_common(n, demand, rng)
     widths = np.array([demand.size_classes[c][1] for c in cls])
     lat = _lateral(road_width, widths, demand.depart_lateral, rng)
+    if origin == "ramp":  # at the ramp's right side: it joins the road on the right
+        lat = -(0.5 * road_width - 0.5 * widths - DEPART_EDGE_MARGIN_M) + rng.uniform(
+            0.0, 0.4, size=n)
     lanes = _depart_lanes(net, n, demand.depart_lateral, rng) if origin == "main" else None
     slotted = demand.insertion == "slots" and origin == "main" and net.n_lanes == 1 and n > 0
     if slotted:

@@ -36,7 +36,7 @@ from cosim.road.spec import RING_ARC_POINTS, RING_EDGES, NetworkSpec, _n_edges
 from cosim.sumo.binaries import netconvert_binary, sumo_version
 
 #: Bump when the generated geometry changes, so old cache entries are not reused.
-BUILDER_VERSION = 2
+BUILDER_VERSION = 3
 
 
 #: Relative tolerance between the requested ring circumference and SUMO's lane length.
@@ -93,6 +93,7 @@ class _Sources:
     ramp_route: tuple[str, ...] | None = None
     periodic: bool = False
     netconvert_options: tuple[str, ...] = ()
+    connections: tuple[str, ...] = ()
 
 
 def _node(nid: str, x: float, y: float, ntype: str = "priority") -> str:
@@ -170,16 +171,26 @@ def _sources_onramp(spec: NetworkSpec) -> _Sources:
     rx, ry = m - spec.ramp_length_m * math.cos(th), -spec.ramp_length_m * math.sin(th)
     nodes = [
         _node("start", 0.0, 0.0, "dead_end"),
-        _node("merge", m, 0.0, "zipper"),  # zipper: ramp and main traffic alternate
+        _node("merge", m, 0.0, "priority"),
         _node("end", spec.length_m, 0.0, "dead_end"),
         _node("ramp_start", rx, ry, "dead_end"),
     ]
     edges = [
         _edge("main_up", "start", "merge", spec.width_m, v, priority=2),
         _edge("main_down", "merge", "end", spec.width_m, v, priority=2),
-        _edge("ramp", "ramp_start", "merge", spec.ramp_width_m, v, priority=1),
+        _edge("ramp", "ramp_start", "merge", spec.ramp_width_m or spec.width_m, v, priority=1),
     ]
-    return _Sources(nodes, edges, ("main_up", "main_down"), ramp_route=("ramp", "main_down"))
+    # One wide lane takes both streams: SUMO would make every vehicle on one link wait for
+    # any vehicle on the other (its junction logic is per lane, blind to lateral position),
+    # so a ramp vehicle would wait for a gap across the whole road. The links pass without
+    # waiting; the streams are side by side (ramp traffic joins at the right, see
+    # NetworkSpec.ramp_width_m) and keep their distance as they merge on the road.
+    connections = (
+        '    <connection from="main_up" to="main_down" fromLane="0" toLane="0" pass="true"/>',
+        '    <connection from="ramp" to="main_down" fromLane="0" toLane="0" pass="true"/>',
+    )
+    return _Sources(nodes, edges, ("main_up", "main_down"), ramp_route=("ramp", "main_down"),
+                    connections=connections)
 
 
 def _sources_varying(spec: NetworkSpec) -> _Sources:
@@ -251,7 +262,13 @@ def _build_into(target: Path, spec: NetworkSpec, sources: _Sources) -> None:
         nod, edg = tmp / "road.nod.xml", tmp / "road.edg.xml"
         nod.write_text("<nodes>\n" + "\n".join(sources.nodes) + "\n</nodes>\n")
         edg.write_text("<edges>\n" + "\n".join(sources.edges) + "\n</edges>\n")
-        _run_netconvert(nod, edg, tmp / NET_FILE_NAME, sources.netconvert_options)
+        options = list(sources.netconvert_options)
+        if sources.connections:
+            con = tmp / "road.con.xml"
+            con.write_text("<connections>\n" + "\n".join(sources.connections)
+                           + "\n</connections>\n")
+            options += ["--connection-files", str(con)]
+        _run_netconvert(nod, edg, tmp / NET_FILE_NAME, tuple(options))
         meta = {"spec": asdict(spec), "sumo": sumo_version(), "builder": BUILDER_VERSION}
         (tmp / SPEC_FILE_NAME).write_text(json.dumps(meta, indent=2, sort_keys=True))
         try:

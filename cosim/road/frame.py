@@ -440,6 +440,9 @@ class RoadNetwork:
     profile_right: tuple[float, ...] = field(default=(), repr=False, compare=False)
     profile_left: tuple[float, ...] = field(default=(), repr=False, compare=False)
     tables: _Tables | None = field(default=None, repr=False, compare=False)
+    #: lanes (junction lanes included) and edges of the main route: a vehicle on one of
+    #: them is on the main road; a ramp's lanes and its junction lanes are not
+    main_lanes: frozenset = field(default=frozenset(), repr=False, compare=False)
 
     # ---- vehicles: SUMO (lane, position, lateral position) <-> road frame (s, d) --------
 
@@ -1277,4 +1280,5 @@ def _road_network(path: Path, net: Any, kind: str, main_route: Sequence[str],
         profile_right=tuple(float(x) for x in right),
         profile_left=tuple(float(x) for x in left),
         tables=tb,
+        main_lanes=frozenset([g.lane_id for g in lanes if g.main] + list(main_route)),
     )

@@ -40,7 +40,12 @@ class NetworkSpec:
         ramp_length_m: straight-line distance from the ramp's start to the merge
             node; SUMO's measured ramp length is reported in
             :attr:`RoadNetwork.ramp_length_m` (the junction takes its share).
-        ramp_width_m: width of the ramp's single lane.
+        ramp_width_m: width of the ramp's single lane, m; 0 (the default): as wide as the
+            main road. SUMO keeps a vehicle's lateral offset from the lane's centre line
+            when it crosses a junction onto a lane of another width, so traffic from a
+            narrow ramp would join the wide lane-free road in its middle; on a ramp as
+            wide as the road, ramp traffic (which departs at the ramp's right side) joins
+            at the road's right side, as on a real on-ramp.
         ramp_angle_deg: angle between ramp and main road at the merge, degrees.
         merge_position_m: distance from the main road's start to the merge node.
         width_profile: varying_width only: consecutive ``(length_m, width_m)``
@@ -62,7 +67,7 @@ class NetworkSpec:
     width_m: float = 10.2
     circumference_m: float = 1000.0
     ramp_length_m: float = 300.0
-    ramp_width_m: float = 3.4
+    ramp_width_m: float = 0.0
     ramp_angle_deg: float = 8.0
     merge_position_m: float = 500.0
     width_profile: tuple[tuple[float, float], ...] = ()
@@ -124,7 +129,8 @@ class NetworkSpec:
     def _validate_onramp(self) -> None:
         self._validate_straight()
         _positive("ramp_length_m", self.ramp_length_m)
-        _positive("ramp_width_m", self.ramp_width_m)
+        if self.ramp_width_m != 0:
+            _positive("ramp_width_m", self.ramp_width_m)
         if not 0.0 < self.ramp_angle_deg < 90.0:
             raise ConfigError(
                 f"network.ramp_angle_deg must be in (0, 90) (got {self.ramp_angle_deg})"

@@ -44,6 +44,9 @@ def _vars():
     return _VARS
 
 
+#: SUMO's default lane-change mode (all its lane-change motivations on).
+SUMO_DEFAULT_LANE_CHANGE_MODE = 1621
+
 _CAPTURED: list[str] = []
 
 
@@ -111,9 +114,14 @@ class SumoWorld:
         self.controlled: set[str] = set()
         self.v_lat_state: dict[str, float] = {}
         self.period = net.length_m if net.periodic else None
-        self.main_lanes = {k for k in net.lane_offsets if self._is_main(k)}
+        self.main_lanes = set(net.main_lanes) or {k for k in net.lane_offsets
+                                                  if self._is_main(k)}
         self._obstacle = None
         self.obstacle_id: str | None = None
+        #: vehicles still on an on-ramp: SUMO moves them only along it (lane-change mode
+        #: 0), so they join the road at the ramp's right side where they departed;
+        #: released to their own driver model (or our law) on the main road
+        self._on_ramp: set[str] = set()
 
     def _is_main(self, lane: str) -> bool:
         edge = lane.rsplit("_", 1)[0] if not lane.startswith(":") else lane
@@ -162,6 +170,9 @@ class SumoWorld:
         veh = ts.vehicle
         for vid in self.departed_now:
             veh.subscribe(vid, _vars())
+            if ".ramp." in vid:  # keeps its lateral place on the ramp (see _release_ramp)
+                veh.setLaneChangeMode(vid, 0)
+                self._on_ramp.add(vid)
             tid = veh.getTypeID(vid)
             self.types[vid] = tid
             self._static[vid] = (
@@ -203,6 +214,8 @@ class SumoWorld:
             rows[k] = (r[v_pos], r[v_lat], r[v_speed], vlat_state.get(vid, r[v_slat]),
                        length, width, off, ld, main, cav, desired)
         self._lane_of = dict(zip(ids, lane, strict=True))
+        if self._on_ramp:
+            self._release_ramp()
         arr = np.array(rows, dtype=float).reshape(n, 11)
         self._pos_of = dict(zip(ids, arr[:, 0].tolist(), strict=True))
         # (lane, position, lateral position) -> (s, d): the lanes' real geometry
@@ -217,6 +230,15 @@ class SumoWorld:
         return RoadSnapshot(ids, s, s_front, d_front, arr[:, 2], arr[:, 3],
                             arr[:, 4], arr[:, 5], arr[:, 9] > 0, on_main, is_static,
                             arr[:, 10])
+
+    def _release_ramp(self) -> None:
+        """Give vehicles that reached the main road back their lane-change model."""
+        veh = self.ts.vehicle
+        for vid in [v for v in self._on_ramp if v not in self._lane_of
+                    or self._lane_of[v] in self.main_lanes]:
+            self._on_ramp.discard(vid)
+            if vid in self._lane_of and vid not in self.controlled:
+                veh.setLaneChangeMode(vid, SUMO_DEFAULT_LANE_CHANGE_MODE)
 
     def take_over(self, ids: list) -> None:
         """Hand CAVs to our controller: no SUMO speed checks, no SUMO lane changes."""
