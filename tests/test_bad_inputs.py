@@ -488,29 +488,37 @@ CLI = [
          files=run_short()[1], says="gui"),
 ]
 
-CASES = FILES + OUTPUTS + NON_FINITE + GEOMETRY + TIME + CLI
-
-# --------------------------------------------------------------------------------------
-# Known gaps outside this change (cosim/analysis/): strict expected failures, so that the
-# fix shows up as an unexpected pass and the marker is removed with it
+# Reading results (cosim analyse) and sweep options
 # --------------------------------------------------------------------------------------
 
-_GAP = pytest.mark.xfail(strict=True, reason="cosim/analysis reads files and --out outside "
-                                             "the rules (issue 14 report)")
-KNOWN_GAPS = [
-    pytest.param(case("analyse_latin1_results", "analyse", "d",
-                      files={"d/results.csv": "run_id,status\ncaf\xe9,ok\n".encode("latin-1")},
-                      says="results.csv"), marks=_GAP, id="analyse_latin1_results"),
-    pytest.param(case("analyse_binary_run_folder", "analyse", "d",
-                      files={"d/summary.csv": BINARY, "d/trajectories.csv": BINARY},
-                      says="summary.csv"), marks=_GAP, id="analyse_binary_run_folder"),
-    pytest.param(case("analyse_out_is_a_file", "analyse", "d", "--out", "f",
-                      files={"d/results.csv": "run_id,status\na,ok\n", "f": "x"},
-                      says="existing file"), marks=_GAP, id="analyse_out_is_a_file"),
-    pytest.param(case("analyse_times_nan", "analyse", "d", "--times", "nan",
-                      files={"d/results.csv": "run_id,status\na,ok\n"}, says="--times"),
-                 marks=_GAP, id="analyse_times_nan"),
+ANALYSE = [
+    case("analyse_latin1_results", "analyse", "d",
+         files={"d/results.csv": "run_id,status\ncaf\xe9,ok\n".encode("latin-1")},
+         says="results.csv"),
+    case("analyse_binary_run_folder", "analyse", "d",
+         files={"d/summary.csv": BINARY, "d/trajectories.csv": BINARY}, says="summary.csv"),
+    case("analyse_out_is_a_file", "analyse", "d", "--out", "f",
+         files={"d/results.csv": "run_id,status\na,ok\n", "f": "x"}, says="existing file"),
+    case("analyse_out_empty", "analyse", "d", "--out", "",
+         files={"d/results.csv": "run_id,status\na,ok\n"}, says="--out"),
+    case("analyse_times_nan", "analyse", "d", "--times", "nan",
+         files={"d/results.csv": "run_id,status\na,ok\n"}, says="--times"),
+    case("analyse_times_outside_the_run", "analyse", "d", "--times", "1e9",
+         files={"d/summary.csv": "a\n1\n", "d/trajectories.csv":
+                "t_s,id,s_m,d_m\n0.0,a,1.0,0.0\n1.0,a,2.0,0.0\n"}, says="outside"),
+    case("analyse_binary_trajectories", "analyse", "d",
+         files={"d/summary.csv": "a\n1\n", "d/trajectories.csv": BINARY},
+         says="trajectories.csv"),
+    case("analyse_confidence_above_one", "analyse", "d", "--confidence", "2",
+         files={"d/results.csv": "run_id,status\na,ok\n"}, says="--confidence"),
+    case("analyse_empty_path", "analyse", "", says="empty"),
+    case("sweep_out_empty", "sweep", "w.toml", "--out", "", files={"w.toml": SWEEP},
+         says="--out"),
+    case("sweep_nothing_to_sweep", "sweep", "w.toml", files={"w.toml": ""},
+         says="nothing to sweep"),
 ]
+
+CASES = FILES + OUTPUTS + NON_FINITE + GEOMETRY + TIME + CLI + ANALYSE
 
 
 def test_the_bad_inputs_number_about_150_and_cover_every_float():
@@ -590,8 +598,7 @@ def assert_refused(rc, out: str, err: str, says: tuple = ()) -> str:
     return lines[0]
 
 
-@pytest.mark.parametrize("c", [*CASES, *KNOWN_GAPS],
-                         ids=[*(c.id for c in CASES), *(p.id for p in KNOWN_GAPS)])
+@pytest.mark.parametrize("c", CASES, ids=[c.id for c in CASES])
 def test_bad_input_is_refused_in_one_line_and_leaves_nothing(c: Case, tmp_path, monkeypatch,
                                                              capfd, built, cache):
     from cosim.cli.main import main

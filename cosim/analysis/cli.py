@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from cosim.analysis.report import analyse
@@ -39,7 +40,43 @@ def add_analyse_parser(subparsers) -> argparse.ArgumentParser:
     return p
 
 
+def _check_options(ns: argparse.Namespace) -> None:
+    """Every option checked before anything is read or written (one ``error:`` line)."""
+    if ns.out is not None:
+        if not ns.out.strip():
+            raise ConfigError("--out must not be empty")
+        if Path(ns.out).exists() and not Path(ns.out).is_dir():
+            raise ConfigError(f"--out {ns.out} is an existing file, not a folder")
+    if not math.isfinite(ns.confidence) or not 0.0 < ns.confidence < 1.0:
+        raise ConfigError(f"--confidence must be between 0 and 1 (got {ns.confidence:g})")
+    for t in ns.times or ():
+        if not math.isfinite(t) or t < 0.0:
+            raise ConfigError(f"--times must be finite times >= 0 s (got {t:g})")
+    if ns.t_range is not None:
+        t0, t1 = ns.t_range
+        if not (math.isfinite(t0) and math.isfinite(t1)) or not t0 < t1:
+            raise ConfigError(f"--t-range must be increasing finite times "
+                              f"(got {t0:g} {t1:g})")
+
+
+def _check_summary(path: Path) -> None:
+    """One run's ``summary.csv`` readable as a table, or one ``error:`` line."""
+    import pandas as pd
+
+    try:
+        text = path.read_text(encoding="utf-8")
+        if "\x00" in text:
+            raise ConfigError(f"{path}: unreadable run summary: binary data")
+        pd.read_csv(path)
+    except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError,
+            OSError) as exc:
+        raise ConfigError(f"{path}: unreadable run summary: {exc}") from None
+
+
 def cmd_analyse(ns: argparse.Namespace) -> int:
+    _check_options(ns)
+    if not ns.results_dir.strip():
+        raise ConfigError("the results folder must not be an empty string")
     root = Path(ns.results_dir)
     if not root.exists():
         raise ConfigError(f"no such folder: {root}")
@@ -47,12 +84,11 @@ def cmd_analyse(ns: argparse.Namespace) -> int:
         from cosim.analysis.figures import plot_run
 
         out = Path(ns.out) if ns.out else root / "analysis"
+        _check_summary(root / "summary.csv")
         if not (root / "trajectories.csv").is_file():
             raise ConfigError(f"{root}: no trajectories.csv to draw "
                               "(run with [outputs] trajectories = true)")
         t_range = tuple(ns.t_range) if ns.t_range else None
-        if t_range is not None and not t_range[0] < t_range[1]:
-            raise ConfigError(f"--t-range must be increasing (got {t_range[0]:g} {t_range[1]:g})")
         for p in plot_run(root, out, times=ns.times, animate=ns.animate, t_range=t_range):
             print(f"figure: {p}")
         return 0

@@ -13,6 +13,13 @@
   the same as a GIF.
 * :func:`plot_run`: the run figures of a run folder (road geometry and scenario name
   from config.toml).
+* Headline (:mod:`cosim.analysis.headline`): :func:`plot_headline_capacity` (queue
+  discharge per arm with confidence intervals), :func:`plot_headline_mixed` (flow on
+  TUM's ring against the CAV share, beside TUM's), :func:`plot_headline_fd` (the ring
+  fundamental diagram per arm) and :func:`plot_headline_gain` (lane-free against fixed
+  rows at equal time gap).
+
+Points that are not stationary (flow drift of 2 % or more) are drawn hollow everywhere.
 
 One style for all: every series has its own colour (Okabe-Ito, colour-blind safe) and
 marker (:func:`series_style`) and a readable label (:func:`series_label`, e.g.
@@ -29,6 +36,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import matplotlib
+
+from cosim.errors import ConfigError
 
 matplotlib.use("Agg")
 
@@ -204,11 +213,17 @@ def fundamental_diagram_figure(
         speeds.append(intervals["space_mean_speed_mps"].to_numpy(float))
         handles.append(Line2D([], [], linestyle="", marker="o", markersize=4, alpha=0.6,
                               color=INTERVAL_COLOUR, label="per interval"))
+    any_rejected = False
     for k, ((_keys, g), label) in enumerate(zip(groups, labels, strict=True)):
         st = series_style(k)
+        ok = stationary_mask(g)
+        any_rejected |= bool((~ok).any())
         for ax, y in ((ax_q, "edie_flow_vph"), (ax_v, "space_mean_speed_mps")):
-            ax.scatter(g["edie_density_vpkm"], g[y], s=18, alpha=0.45, color=st["color"],
-                       marker=st["marker"], linewidths=0, zorder=2)
+            ax.scatter(g.loc[ok, "edie_density_vpkm"], g.loc[ok, y], s=18, alpha=0.45,
+                       color=st["color"], marker=st["marker"], linewidths=0, zorder=2)
+            ax.scatter(g.loc[~ok, "edie_density_vpkm"], g.loc[~ok, y], s=22, alpha=0.8,
+                       facecolors="none", edgecolors=st["color"], marker=st["marker"],
+                       linewidths=1.0, zorder=2)
         if demand_col and demand_col in g:
             curve = g.groupby(demand_col)[list(FD_COLUMNS)].mean()
         else:
@@ -219,6 +234,8 @@ def fundamental_diagram_figure(
         handles.insert(k, line)
     handles.append(Line2D([], [], linestyle="", marker="o", markersize=5, color="0.3",
                           alpha=0.45, label="per run (marker of its series)"))
+    if any_rejected:
+        handles.append(REJECTED_HANDLE())
     ax_q.set_xlabel("density (Edie), veh/km")
     ax_q.set_ylabel("flow (Edie), veh/h")
     ax_v.set_xlabel("density (Edie), veh/km")
@@ -240,6 +257,20 @@ def fundamental_diagram_figure(
     fig.suptitle(_title("Fundamental diagram", title))
     fig.tight_layout()
     return fig
+
+
+def stationary_mask(runs: pd.DataFrame) -> np.ndarray:
+    """(R,) bool: runs accepted as stationary (column ``stationary``; all when absent).
+    Non-stationary runs are drawn as hollow markers in every figure."""
+    if "stationary" not in runs:
+        return np.ones(len(runs), dtype=bool)
+    return runs["stationary"].astype("boolean").fillna(False).to_numpy(bool)
+
+
+def REJECTED_HANDLE() -> Line2D:  # noqa: N802 (a legend entry, built fresh per figure)
+    """Legend entry of a rejected (non-stationary) point: a hollow grey marker."""
+    return Line2D([], [], linestyle="", marker="o", markersize=5, markerfacecolor="none",
+                  markeredgecolor="0.3", label="hollow: not stationary (drift >= 2 %)")
 
 
 def plot_fundamental_diagram(
@@ -648,6 +679,7 @@ def plot_run(
     run_dir = Path(run_dir)
     out = Path(out_dir) if out_dir is not None else run_dir / "figures"
     tr = _read_traj(run_dir / "trajectories.csv")
+    _check_times(tr, times, t_range, run_dir)
     cfg = {}
     if (run_dir / "config.toml").is_file():
         cfg = tomllib.loads((run_dir / "config.toml").read_text())
@@ -672,7 +704,27 @@ def _read_traj(traj) -> pd.DataFrame:
     path = Path(traj)
     if not path.is_file():
         raise FileNotFoundError(f"no trajectories file {path}")
-    return pd.read_csv(path)
+    try:
+        tr = pd.read_csv(path)
+    except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError,
+            OSError) as exc:
+        raise ConfigError(f"{path}: unreadable trajectories: {exc}") from None
+    missing = [c for c in ("t_s", "id", "s_m", "d_m") if c not in tr]
+    if missing:
+        raise ConfigError(f"{path}: not a trajectories table (no column {missing[0]!r})")
+    return tr
+
+
+def _check_times(tr: pd.DataFrame, times, t_range, run_dir: Path) -> None:
+    """Requested instants (s) inside the recorded span, or one ``error:`` line."""
+    if tr.empty:
+        raise ConfigError(f"{run_dir}: trajectories.csv holds no rows")
+    t_min, t_max = float(tr["t_s"].min()), float(tr["t_s"].max())
+    asked = list(times or ()) + list(t_range or ())
+    outside = [t for t in asked if not t_min - 1e-9 <= t <= t_max + 1e-9]
+    if outside:
+        raise ConfigError(f"time {outside[0]:g} s is outside the recorded span "
+                          f"{t_min:g}-{t_max:g} s of {run_dir}")
 
 
 def _save(fig, out_path: str | Path) -> Path:
@@ -681,3 +733,190 @@ def _save(fig, out_path: str | Path) -> Path:
     fig.savefig(out, dpi=120, bbox_inches="tight")
     plt.close(fig)
     return out
+
+
+# --------------------------------------------------------------------------------------
+# Headline figures (cosim.analysis.headline)
+# --------------------------------------------------------------------------------------
+
+
+def headline_capacity_figure(bottleneck: pd.DataFrame, title: str | None = None):
+    """The figure of :func:`plot_headline_capacity` (a matplotlib Figure, not saved)."""
+    fig, ax = plt.subplots(figsize=(8, 0.6 * max(len(bottleneck), 2) + 1.4))
+    y = np.arange(len(bottleneck))[::-1]
+    for k, (yk, (_, r)) in enumerate(zip(y, bottleneck.iterrows(), strict=True)):
+        st = series_style(k)
+        cap = float(r["capacity_vph"])
+        if not math.isfinite(cap):
+            ax.text(0.01, yk, "no valid run: " + str(r.get("why_rejected", ""))[:70],
+                    transform=ax.get_yaxis_transform(), va="center", fontsize=7, color="0.35")
+            continue
+        lo, hi = float(r["ci_low_vph"]), float(r["ci_high_vph"])
+        err = [[cap - lo], [hi - cap]] if math.isfinite(lo) else None
+        all_stationary = int(r["n_stationary"]) == int(r["n_valid"])
+        ax.errorbar([cap], [yk], xerr=err, capsize=4, color=st["color"], marker=st["marker"],
+                    markersize=7, linestyle="",
+                    markerfacecolor=st["color"] if all_stationary else "none")
+        ax.text(cap, yk + 0.25, f"{cap:,.0f}".replace(",", " ")
+                + f"  ({int(r['n_valid'])}/{int(r['n_runs'])} valid)", fontsize=7,
+                ha="center", color=st["color"])
+    ax.set_yticks(y)
+    ax.set_yticklabels(list(bottleneck["label"]), fontsize=8)
+    ax.set_xlabel("queue-discharge flow (road-limited capacity), veh/h")
+    ax.set_xlim(0, _top([bottleneck], "capacity_vph", "ci_high_vph") * 1.1)
+    ax.set_ylim(-0.7, len(bottleneck) - 0.3)
+    ax.grid(alpha=0.3, axis="x")
+    ax.legend(handles=[Line2D([], [], linestyle="", marker="o", color="0.3",
+                              label="mean of the valid runs, CI over them"),
+                       REJECTED_HANDLE()], fontsize=7, loc="lower right")
+    ax.set_title(f"{_title('Capacity at a bottleneck', title)} (error bars: CI over seeds)",
+                 fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def plot_headline_capacity(bottleneck: pd.DataFrame, out_path: str | Path,
+                           title: str | None = None) -> Path:
+    """Queue discharge (veh/h) per bottleneck arm with its confidence interval; arms
+    without a valid run say why; hollow when a valid run is not stationary; the PNG path.
+
+    Args:
+        bottleneck: :func:`cosim.analysis.headline.bottleneck_table`.
+    """
+    return _save(headline_capacity_figure(bottleneck, title), out_path)
+
+
+def headline_mixed_figure(tum: pd.DataFrame, runs: pd.DataFrame,
+                          reference: dict[float, float] | None = None,
+                          title: str | None = None):
+    """The figure of :func:`plot_headline_mixed` (a matplotlib Figure, not saved)."""
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    if reference:
+        xs = sorted(reference)
+        ax.plot([100 * x for x in xs], [reference[x] for x in xs], color="k", marker="s",
+                linestyle="--", markersize=5, label="TUM LaneFreeDrive (published)")
+    st = series_style(0)
+    if len(runs):
+        ok = stationary_mask(runs)
+        share = 100 * runs["demand.cav_share"].astype(float)
+        ax.scatter(share[ok], runs.loc[ok, "edie_flow_vph"], s=18, alpha=0.5,
+                   color=st["color"], marker=st["marker"], linewidths=0)
+        ax.scatter(share[~ok], runs.loc[~ok, "edie_flow_vph"], s=24, facecolors="none",
+                   edgecolors=st["color"], marker=st["marker"], linewidths=1.0)
+    if len(tum):
+        y = tum["flow_vph"].to_numpy(float)
+        lo = tum["ci_low_vph"].to_numpy(float)
+        hi = tum["ci_high_vph"].to_numpy(float)
+        err = np.vstack([np.where(np.isfinite(lo), y - lo, 0.0),
+                         np.where(np.isfinite(hi), hi - y, 0.0)])
+        ax.errorbar(100 * tum["cav_share"].to_numpy(float), y, yerr=err, capsize=3,
+                    label="ours: mean (CI over seeds where several)", **st)
+    ax.scatter([], [], s=18, color=st["color"], marker=st["marker"], label="ours: per run")
+    handles, _ = ax.get_legend_handles_labels()
+    ax.legend(handles=[*handles, REJECTED_HANDLE()], fontsize=8, loc="upper left")
+    ax.set_xlabel("CAV share, %")
+    ax.set_ylabel("flow (Edie, whole ring), veh/h")
+    ax.set_xlim(-5, 105)
+    top = _top([tum, runs], "flow_vph", "ci_high_vph", "edie_flow_vph")
+    ax.set_ylim(0, max(top, 1.05 * max(reference.values())) if reference else top)
+    ax.grid(alpha=0.3)
+    ax.set_title(_title("Mixed traffic on TUM's ring, 225 veh/km", title), fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def plot_headline_mixed(tum: pd.DataFrame, runs: pd.DataFrame, out_path: str | Path,
+                        reference: dict[float, float] | None = None,
+                        title: str | None = None) -> Path:
+    """Flow (veh/h) on TUM's ring against the CAV share (%): every run (hollow when not
+    stationary), the mean with its CI, and TUM's published flows (``reference``,
+    veh/h by share); the PNG path.
+
+    Args:
+        tum: :func:`cosim.analysis.headline.tum_ring_table`; runs: the ring's run rows
+            (``demand.cav_share``, ``edie_flow_vph``, ``stationary``).
+    """
+    return _save(headline_mixed_figure(tum, runs, reference, title), out_path)
+
+
+def headline_fd_figure(runs: pd.DataFrame, title: str | None = None):
+    """The figure of :func:`plot_headline_fd` (a matplotlib Figure, not saved)."""
+    fig, (ax_q, ax_v) = plt.subplots(1, 2, figsize=(12, 5))
+    arms = list(dict.fromkeys(runs["label"])) if len(runs) else []
+    for k, label in enumerate(arms):
+        g = runs[runs["label"] == label].sort_values("edie_density_vpkm")
+        st = series_style(k)
+        ok = stationary_mask(g)
+        curve = g.groupby("demand_level")[list(FD_COLUMNS)].mean().sort_values(
+            "edie_density_vpkm")
+        for ax, y in ((ax_q, "edie_flow_vph"), (ax_v, "space_mean_speed_mps")):
+            ax.plot(np.r_[0.0, curve["edie_density_vpkm"]] if y == "edie_flow_vph"
+                    else curve["edie_density_vpkm"],
+                    np.r_[0.0, curve[y]] if y == "edie_flow_vph" else curve[y],
+                    color=st["color"], linestyle=st["linestyle"], linewidth=1.2,
+                    label=label if ax is ax_q else None)
+            ax.scatter(g.loc[ok, "edie_density_vpkm"], g.loc[ok, y], color=st["color"],
+                       marker=st["marker"], s=30, zorder=3)
+            ax.scatter(g.loc[~ok, "edie_density_vpkm"], g.loc[~ok, y], facecolors="none",
+                       edgecolors=st["color"], marker=st["marker"], s=34, linewidths=1.2,
+                       zorder=3)
+    ax_q.set_xlabel("density (Edie), veh/km")
+    ax_q.set_ylabel("flow (Edie), veh/h")
+    ax_v.set_xlabel("density (Edie), veh/km")
+    ax_v.set_ylabel("space-mean speed, m/s")
+    for ax, y in ((ax_q, "edie_flow_vph"), (ax_v, "space_mean_speed_mps")):
+        ax.grid(alpha=0.3)
+        ax.set_xlim(0, _top([runs], "edie_density_vpkm"))
+        ax.set_ylim(0, _top([runs], y))
+    handles, _ = ax_q.get_legend_handles_labels()
+    ax_q.legend(handles=[*handles, REJECTED_HANDLE()], fontsize=7, loc="upper left")
+    fig.suptitle(_title("Ring fundamental diagram (stationary runs filled)", title))
+    fig.tight_layout()
+    return fig
+
+
+def plot_headline_fd(runs: pd.DataFrame, out_path: str | Path, title: str | None = None
+                     ) -> Path:
+    """Flow- and speed-density of the ring arms: every run (hollow when not stationary)
+    and the arm's line through its density means from the origin; the PNG path.
+
+    Args:
+        runs: run rows with ``label`` (the arm's name), ``demand_level``,
+            ``edie_density_vpkm``, ``edie_flow_vph``, ``space_mean_speed_mps``,
+            ``stationary``.
+    """
+    return _save(headline_fd_figure(runs, title), out_path)
+
+
+def headline_gain_figure(gain: pd.DataFrame, title: str | None = None):
+    """The figure of :func:`plot_headline_gain` (a matplotlib Figure, not saved)."""
+    levels = sorted(gain["ring_density_vpkm"].unique()) if len(gain) else []
+    fig, axes = plt.subplots(1, max(len(levels), 1), figsize=(5.5 * max(len(levels), 1), 4.2),
+                             squeeze=False, sharey=True)
+    names = (("lanefree_vph", "lane-free"), ("fixed4_vph", "4 fixed rows"),
+             ("rows3_vph", "3 fixed rows (lanes)"))
+    for ax, k in zip(axes[0], levels, strict=False):
+        g = gain[gain["ring_density_vpkm"] == k].sort_values("time_gap_s")
+        for j, (col, name) in enumerate(names):
+            if col in g and g[col].notna().any():
+                ax.plot(g["time_gap_s"], g[col], label=name, markersize=6, **series_style(j))
+        ax.set_title(f"{k:g} veh/km", fontsize=9)
+        ax.set_xlabel("time gap T, s")
+        ax.grid(alpha=0.3)
+    axes[0, 0].set_ylabel("flow (Edie), veh/h")
+    axes[0, 0].set_ylim(0, _top([gain], *(c for c, _ in names)))
+    axes[0, 0].legend(fontsize=8)
+    fig.suptitle(_title("Lane-free gain at equal time gap (100 % CAVs, ring)", title))
+    fig.tight_layout()
+    return fig
+
+
+def plot_headline_gain(gain: pd.DataFrame, out_path: str | Path, title: str | None = None
+                       ) -> Path:
+    """Flow (veh/h) against the time gap (s) of the same law lane-free, in 4 fixed rows
+    and in 3 fixed rows, one panel per ring density; the PNG path.
+
+    Args:
+        gain: :func:`cosim.analysis.headline.lanefree_gain_table`.
+    """
+    return _save(headline_gain_figure(gain, title), out_path)

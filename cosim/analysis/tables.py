@@ -8,6 +8,16 @@ A **series** is one curve of the fundamental diagram: a CAV share and a controll
 parameter except the demand level and the seed. The **demand level** is the swept
 ``demand.inflow_vph`` (open roads, veh/h) or ``demand.ring_density_vpkm`` (rings, veh/km).
 
+*Arms*: a sweep whose variants are all named ``ARM#RUN`` (one variant per run, e.g. the
+headline's ``bottleneck/lanefree#2``) is grouped by ``arm`` (the name before ``#``)
+instead of by variant, and its demand level is ``demand_level``: the ring density
+(veh/km) of ring runs, the inflow (veh/h) of the others.
+
+*Rejected points*: every run row carries ``stationary`` (its interval flows drifted by
+less than 2 %, :mod:`cosim.metrics.capacity`) and ``entrance_limited`` (the entrance, not
+the road, set its flow); ``fd_runs`` shows both, ``capacity`` counts them and says
+whether the maximum is such a point, and the figures draw non-stationary points hollow.
+
 Tables (each a DataFrame; :mod:`cosim.analysis.report` writes them as CSV and Markdown):
 
 * ``fd_runs``: one point per run: Edie flow (veh/h), density (veh/km), space-mean speed
@@ -19,7 +29,14 @@ Tables (each a DataFrame; :mod:`cosim.analysis.report` writes them as CSV and Ma
   demand levels of the run's mean Edie flow (mean over the measurement intervals after
   warm-up), then the mean over seeds with a t-based confidence interval
   (``capacity_ci_low/high_vph``); ``at_grid_edge`` is true when that maximum is reached
-  at the highest demand tested (the capacity may be higher);
+  at the highest demand tested (the capacity may be higher); ``n_entrance_limited_max``
+  and ``n_not_stationary_max`` count the seeds whose maximum is an entrance-limited
+  (a lower bound of the road's capacity: an entrance service rate) or non-stationary
+  point;
+* ``discharge``: per series with a bottleneck, the queue-discharge flow (road-limited
+  capacity, :mod:`cosim.metrics.capacity`) over the runs whose bottleneck was active and
+  not entrance-limited (``n_valid`` of ``n_runs``), mean with a t-based CI, and how many
+  of them were stationary;
 * ``safety``: collisions (sum over seeds), minimum gaps and side clearances (minimum),
   time headways, safety-layer activations, per series and demand level;
 * ``boundary``: boundary violations (vehicle-steps, vehicles, worst excursion, share);
@@ -46,6 +63,10 @@ DEMAND_COLUMNS = ("demand.inflow_vph", "demand.ring_density_vpkm")
 #: Always part of a series (the brief: one curve per CAV share and controller).
 CORE_SERIES = ("demand.cav_share", "controller.kind")
 FD_COLUMNS = ("edie_density_vpkm", "edie_flow_vph", "space_mean_speed_mps")
+#: Flags of a run that reject it as a point of a fundamental diagram or capacity.
+FLAG_COLUMNS = ("stationary", "flow_drift", "entrance_limited")
+#: Separates an arm from the rest of a variant's name (``bottleneck/lanefree#2``).
+ARM_SEPARATOR = "#"
 
 SAFETY_AGG = (
     ("collisions_sumo_cav", "sum"),
@@ -67,6 +88,9 @@ SAFETY_AGG = (
     ("safety_side_activations", "sum"),
     ("safety_edge_activations", "sum"),
     ("vehicle_steps", "sum"),
+    ("harsh_accel_share_cav", "mean"),
+    ("harsh_accel_share_hdv", "mean"),
+    ("safety_activations_per_cav_km", "mean"),
 )
 BOUNDARY_AGG = (
     ("boundary_vehicle_steps", "sum"),
@@ -118,7 +142,8 @@ def load_results(path: str | Path) -> SweepResults:
         raise ConfigError(f"no results table at {csv} (run 'cosim sweep' first)")
     try:
         table = pd.read_csv(csv)
-    except (pd.errors.EmptyDataError, pd.errors.ParserError) as exc:
+    except (pd.errors.EmptyDataError, pd.errors.ParserError, UnicodeDecodeError,
+            OSError) as exc:
         raise ConfigError(f"{csv}: unreadable results table: {exc}") from None
     for col in ("run_id", "status"):
         if col not in table:
@@ -130,8 +155,62 @@ def load_results(path: str | Path) -> SweepResults:
             plan = json.loads((root / "sweep.json").read_text())
         except ValueError:
             plan = {}
+    table = _normalise_flags(table)
+    if _has_arms(table):
+        table = add_arms(table)
+        return SweepResults(root, table, plan, "demand_level", ["arm"])
     demand = demand_column(table, plan)
     return SweepResults(root, table, plan, demand, series_columns(table, plan, demand))
+
+
+def _normalise_flags(table: pd.DataFrame) -> pd.DataFrame:
+    """Boolean flag columns as booleans (CSV may hold True/False strings or blanks)."""
+    for col in ("stationary", "entrance_limited", "bottleneck_active", "queue_at_entrance",
+                "discharge_stationary"):
+        if col in table:
+            table[col] = table[col].map(_as_bool).astype("boolean")
+    return table
+
+
+def _as_bool(v):
+    if isinstance(v, str):
+        return {"true": True, "false": False}.get(v.strip().lower())
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return None
+    return bool(v)
+
+
+def _has_arms(table: pd.DataFrame) -> bool:
+    if "variant" not in table:
+        return False
+    names = table["variant"].dropna().astype(str)
+    return len(names) > 0 and bool(names.str.contains(ARM_SEPARATOR, regex=False).all())
+
+
+def add_arms(table: pd.DataFrame) -> pd.DataFrame:
+    """Columns ``arm`` (variant name before ``#``), ``part`` (arm before ``/``, or "") and
+    ``demand_level`` (ring density on rings, veh/km; else inflow, veh/h)."""
+    import numpy as np
+
+    table = table.copy()
+    names = table["variant"].astype(str)
+    table["arm"] = names.str.split(ARM_SEPARATOR, n=1).str[0]
+    table["part"] = [a.split("/", 1)[0] if "/" in a else "" for a in table["arm"]]
+    dens = pd_numeric(table, "demand.ring_density_vpkm")
+    inflow = pd_numeric(table, "demand.inflow_vph")
+    ring = (table["network.kind"] == "ring") if "network.kind" in table else np.isfinite(dens)
+    table["demand_level"] = np.where(ring, dens, inflow)
+    return table
+
+
+def pd_numeric(table: pd.DataFrame, col: str):
+    """``table[col]`` as floats (NaN where missing or not a number)."""
+    import numpy as np
+    import pandas as pd
+
+    if col not in table:
+        return np.full(len(table), np.nan)
+    return pd.to_numeric(table[col], errors="coerce").to_numpy(float)
 
 
 def demand_column(table: pd.DataFrame, plan: dict | None = None) -> str | None:
@@ -211,7 +290,7 @@ def fd_runs(res: SweepResults) -> pd.DataFrame:
     cols = ["run_id", *res.series_cols]
     if res.demand_col:
         cols.append(res.demand_col)
-    cols += [c for c in ("seed", *FD_COLUMNS) if c in ok]
+    cols += [c for c in ("seed", *FD_COLUMNS, *FLAG_COLUMNS) if c in ok]
     return ok[cols].reset_index(drop=True)
 
 
@@ -300,6 +379,11 @@ def capacity_table(res: SweepResults, confidence: float = 0.95) -> pd.DataFrame:
             row["density_at_max_vpkm"] = float(peaks["edie_density_vpkm"].mean())
         if "space_mean_speed_mps" in peaks:
             row["speed_at_max_mps"] = float(peaks["space_mean_speed_mps"].mean())
+        for flag, col in (("entrance_limited", "n_entrance_limited_max"),
+                          ("stationary", "n_not_stationary_max")):
+            if flag in peaks:
+                vals = peaks[flag].astype("boolean").fillna(flag == "entrance_limited")
+                row[col] = int(vals.sum()) if flag == "entrance_limited" else int((~vals).sum())
         if demand:
             levels = np.sort(g[demand].dropna().unique())
             row["demand_at_max"] = float(peaks[demand].median())
@@ -307,6 +391,55 @@ def capacity_table(res: SweepResults, confidence: float = 0.95) -> pd.DataFrame:
             row["capacity_of_mean_curve_vph"] = float(curve.max())
             row["n_demand_levels"] = len(levels)
             row["at_grid_edge"] = bool(len(levels) > 1 and curve.idxmax() == levels[-1])
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def discharge_table(res: SweepResults, confidence: float = 0.95) -> pd.DataFrame:
+    """Queue-discharge flow (road-limited capacity) per series, over its valid runs.
+
+    A run is valid when its bottleneck was active (``bottleneck_active``) and it was not
+    entrance-limited. Columns: ``n_runs`` (runs with a bottleneck), ``n_valid``,
+    ``n_stationary`` (valid runs whose discharge drifted by less than 2 %),
+    ``discharge_vph`` (mean over the valid runs), ``discharge_ci_low_vph`` /
+    ``discharge_ci_high_vph`` (t-based), ``discharge_sd_vph``, ``bottleneck`` (kind),
+    ``why_rejected`` (the first rejected run's ``capacity_note``). Empty without
+    bottleneck runs.
+    """
+    import pandas as pd
+
+    ok = res.ok
+    if ok.empty or "discharge_flow_vph" not in ok or "bottleneck_kind" not in ok:
+        return pd.DataFrame()
+    ok = ok[ok["bottleneck_kind"].fillna("").astype(str) != ""]
+    if ok.empty:
+        return pd.DataFrame()
+    rows = []
+    for key, g in _group(ok, res.series_cols):
+        row = _key_dict(res.series_cols, key)
+        valid = g["bottleneck_active"].fillna(False).astype(bool)
+        if "entrance_limited" in g:
+            valid &= ~g["entrance_limited"].fillna(False).astype(bool)
+        v = g[valid]
+        mean, half, n = t_interval(v["discharge_flow_vph"].astype(float), confidence)
+        n_stat = 0
+        if len(v) and "discharge_stationary" in v:
+            n_stat = int(v["discharge_stationary"].fillna(False).astype(bool).sum())
+        row.update(
+            bottleneck=str(g["bottleneck_kind"].iloc[0]), n_runs=len(g), n_valid=n,
+            n_stationary=n_stat,
+            discharge_vph=mean,
+            discharge_ci_low_vph=mean - half if n > 1 else math.nan,
+            discharge_ci_high_vph=mean + half if n > 1 else math.nan,
+            discharge_sd_vph=(float(v["discharge_flow_vph"].astype(float).std(ddof=1))
+                              if n > 1 else math.nan),
+        )
+        bad = g[~valid]
+        note = ""
+        if len(bad) and "capacity_note" in bad:
+            notes = bad["capacity_note"].dropna().astype(str)
+            note = notes.iloc[0] if len(notes) else ""
+        row["why_rejected"] = note
         rows.append(row)
     return pd.DataFrame(rows)
 

@@ -11,6 +11,7 @@ import argparse
 from pathlib import Path
 
 from cosim.cli.errors import run_command
+from cosim.errors import ConfigError
 from cosim.sweeps.execute import START_METHODS, check_options, check_output, run_sweep
 from cosim.sweeps.plan import default_out_dir, load_sweep
 from cosim.sweeps.results import read_row
@@ -60,6 +61,8 @@ def _runs(n: int) -> str:
 def cmd_sweep(ns: argparse.Namespace) -> int:
     resume, replace = ns.resume, getattr(ns, "replace", False)
     check_options(resume, replace, ns.workers, ns.scheduler, ns.dask_local, ns.start_method)
+    if ns.out is not None and not ns.out.strip():
+        raise ConfigError("--out must not be empty")
     plan = load_sweep(ns.file, smoke=ns.smoke)
     out = Path(ns.out) if ns.out else default_out_dir(plan)
     if not ns.dry_run:

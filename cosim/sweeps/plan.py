@@ -181,6 +181,9 @@ def sweep_from_dict(data: dict, source: Path | None = None, smoke: bool = False)
     from cosim.config.scenario import scenario_from_dict
 
     _check_keys(data, _TOP_KEYS, "top level")
+    if not data:
+        raise ConfigError("nothing to sweep: the file is empty (give [axes], [[variants]] "
+                          "or seeds; one run is 'cosim run')")
     head = data.get("sweep", {})
     _check_table(head, "[sweep]")
     _check_keys(head, _SWEEP_KEYS, "[sweep]")
