@@ -2,31 +2,46 @@
 PYTHON ?= python3.11
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
-STAMP  := $(VENV)/.installed
+RUNTIME := $(VENV)/.installed-runtime
+DEV     := $(VENV)/.installed-dev
+# Test processes in parallel (pytest-xdist); `make test JOBS=1` runs them one by one.
+JOBS   ?= 2
 
-.PHONY: run test lint bench clean install
+.PHONY: run test test-fast lint bench clean install install-dev
 
-$(STAMP): pyproject.toml
+$(VENV)/bin/python:
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found (set PYTHON=...)"; exit 1; }
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
+
+# `make run` installs what a run needs; `make test` adds the test and lint tools.
+$(RUNTIME): pyproject.toml | $(VENV)/bin/python
+	$(PY) -m pip install --quiet -e .
+	touch $(RUNTIME)
+
+$(DEV): pyproject.toml | $(VENV)/bin/python
 	$(PY) -m pip install --quiet -e ".[dev,dask]"
-	touch $(STAMP)
+	touch $(DEV) $(RUNTIME)
 
-install: $(STAMP)
+install: $(RUNTIME)
+install-dev: $(DEV)
 
-run: $(STAMP)
+run: $(RUNTIME)
 	$(VENV)/bin/cosim run
 
-test: $(STAMP)
+test: $(DEV)
 	$(VENV)/bin/ruff check .
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(JOBS)
 
-lint: $(STAMP)
+# The unit tests only (no SUMO), about a minute.
+test-fast: $(DEV)
+	$(PY) -m pytest -q -n $(JOBS) -m "not sumo"
+
+lint: $(DEV)
 	$(VENV)/bin/ruff check .
 
-bench: $(STAMP)
-	$(PY) benchmarks/bench_plane_controller.py
+bench: $(DEV)
+	$(PY) benchmarks/bench_cosim.py
 
 clean:
 	rm -rf $(VENV) outputs .pytest_cache
