@@ -26,6 +26,7 @@ Usage::
 
     python experiments/check_detectors.py                 # 1 km, 5 min, about 15 s
     python experiments/check_detectors.py --quick         # the test's case: 500 m, 180 s
+    python experiments/check_detectors.py --smoke         # the same as --quick
     python experiments/check_detectors.py --controller sumo --cav-share 1
     python experiments/check_detectors.py --json          # also print RESULT <json>
 
@@ -261,7 +262,8 @@ def _fmt(df: pd.DataFrame) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="500 m road, 180 s (the test's case)")
+    ap.add_argument("--quick", "--smoke", dest="quick", action="store_true",
+                    help="500 m road, 180 s (the test's case; --smoke is the same)")
     ap.add_argument("--length", type=float, default=None, help="road length, m")
     ap.add_argument("--duration", type=float, default=None, help="simulated time, s")
     ap.add_argument("--warmup", type=float, default=60.0)
