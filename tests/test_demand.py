@@ -486,3 +486,164 @@ def test_slot_insertion_keeps_headway_and_never_departs_faster_than_the_slot_lea
             tight[tau1] += gap < MIN_GAP_M + v1 * 1.0 - 0.5  # closer than a human may
     assert tight[CAV_TAU_S] > 0  # CAVs do use their shorter reaction time
     assert tight[HDV_TAU_S] == 0
+
+
+# --------------------------------------------------------------------------------------
+# Human drivers' vTypes (calibrated by experiments/calibrate_humans.py)
+# --------------------------------------------------------------------------------------
+
+#: SL2015-only attributes that the calibrated human drivers carry on lane-free roads.
+SL2015_HDV_KEYS = ("minGapLat", "maxSpeedLat", "lcPushy", "lcAssertive", "lcTimeToImpatience")
+
+
+def test_human_vtypes_carry_the_calibrated_drivers_and_cavs_are_unchanged(
+    straight: RoadNetwork, cache: Path, tmp_path: Path
+) -> None:
+    """Lane-free: human drivers get SL2015 with the calibrated lateral gap, lateral speed,
+    pushiness, assertiveness and impatience, and the calibrated Krauss tau and sigma; CAVs
+    keep SUMO's 0.5 m lateral gap, no lc* attributes, sigma 0 and their short tau. Three
+    lanes: LC2013 with the same human car following (the two human arms differ only in
+    lanes) and none of the SL2015-only attributes. Colours stay blue / orange."""
+    from cosim.demand import spec
+    from cosim.demand.routes import CAV_RGB, HDV_RGB, lane_change_attributes
+
+    free = _vtypes(write_routes(straight, DemandSpec(cav_share=0.5), 1,
+                                tmp_path / "free.rou.xml", horizon_s=60.0).path)
+    lanes_net = build_network(NetworkSpec(kind="three_lane", length_m=200.0), cache)
+    laned = _vtypes(write_routes(lanes_net, DemandSpec(cav_share=0.5), 1,
+                                 tmp_path / "lanes.rou.xml", horizon_s=60.0).path)
+    expected_hdv = {
+        "laneChangeModel": "SL2015", "latAlignment": "arbitrary",
+        "minGapLat": spec.HDV_MIN_GAP_LAT_M, "maxSpeedLat": spec.HDV_MAX_SPEED_LAT_MPS,
+        "lcPushy": spec.HDV_LC_PUSHY, "lcAssertive": spec.HDV_LC_ASSERTIVE,
+        "lcTimeToImpatience": spec.HDV_LC_TIME_TO_IMPATIENCE_S,
+        "tau": spec.HDV_TAU_S, "sigma": spec.HDV_SIGMA,
+    }
+    for k in range(4):
+        hdv, cav = free[f"hdv_{k}"], free[f"cav_{k}"]
+        for key, value in expected_hdv.items():
+            got = hdv.get(key)
+            assert (got == value if isinstance(value, str) else float(got) == value), key
+        assert hdv.get("color") == ",".join(map(str, HDV_RGB))
+        assert cav.get("laneChangeModel") == "SL2015"
+        assert float(cav.get("minGapLat")) == spec.MIN_GAP_LAT_M == 0.5
+        assert float(cav.get("maxSpeedLat")) == spec.MAX_SPEED_LAT_MPS
+        assert float(cav.get("tau")) == spec.CAV_TAU_S and float(cav.get("sigma")) == 0.0
+        assert not [a for a in cav.attrib if a.startswith("lc")]
+        assert cav.get("color") == ",".join(map(str, CAV_RGB))
+        lane_hdv = laned[f"hdv_{k}"]
+        assert lane_hdv.get("laneChangeModel") == "LC2013"
+        assert not [a for a in SL2015_HDV_KEYS + ("latAlignment",) if a in lane_hdv.attrib]
+        for key in ("tau", "sigma", "minGap", "accel", "decel", "length", "width"):
+            assert lane_hdv.get(key) == hdv.get(key), key  # same human car following
+    # The calibrated drivers differ from SUMO's defaults (tau 1 s, minGapLat 0.6 m / our 0.5).
+    assert spec.HDV_TAU_S > 1.0 and spec.HDV_MIN_GAP_LAT_M > spec.MIN_GAP_LAT_M
+    assert spec.HDV_LC_PUSHY > 0 and spec.HDV_LC_ASSERTIVE > 1.0
+    assert lane_change_attributes("hdv", lanes=True) == {"laneChangeModel": "LC2013"}
+    assert list(lane_change_attributes("hdv", lanes=False))[:2] == ["laneChangeModel",
+                                                                    "latAlignment"]
+
+
+@pytest.mark.sumo
+def test_sumo_reads_the_human_driver_attributes(
+    straight: RoadNetwork, cache: Path, tmp_path: Path
+) -> None:
+    """SUMO accepts the written vTypes (an unknown or out-of-range lane-change attribute
+    stops it: e.g. lcImpatience < 0 is refused) and holds the calibrated values: Krauss
+    tau, lateral gap and speed, and SL2015's lcPushy, lcAssertive, lcTimeToImpatience;
+    the three-lane file loads with LC2013 and the same tau."""
+    from cosim.demand import spec
+
+    free = write_routes(straight, DemandSpec(cav_share=0.0, inflow_vph=3600.0), 3,
+                        tmp_path / "free.rou.xml", horizon_s=30.0)
+    lanes_net = build_network(NetworkSpec(kind="three_lane", length_m=200.0), cache)
+    laned = write_routes(lanes_net, DemandSpec(cav_share=0.0, inflow_vph=3600.0), 3,
+                         tmp_path / "lanes.rou.xml", horizon_s=30.0)
+    out = run_python(f"""
+        import json
+        import libsumo as t
+        res = {{}}
+        for name, net, routes, extra in (
+                ("free", {str(straight.net_file)!r}, {str(free.path)!r},
+                 ["--lateral-resolution", "0.8"]),
+                ("lanes", {str(lanes_net.net_file)!r}, {str(laned.path)!r}, [])):
+            t.start(["sumo", "-n", net, "-r", routes, "--no-step-log", "true",
+                     "--step-length", "0.1", *extra])
+            while t.vehicle.getIDCount() == 0:
+                t.simulationStep()
+            vid = t.vehicle.getIDList()[0]
+            typ = t.vehicle.getTypeID(vid)
+            lc = {{}}
+            for key in ("lcPushy", "lcAssertive", "lcTimeToImpatience"):
+                try:
+                    lc[key] = float(t.vehicle.getParameter(vid, "laneChangeModel." + key))
+                except Exception:
+                    lc[key] = None
+            res[name] = {{"tau": t.vehicletype.getTau(typ),
+                         "minGapLat": t.vehicletype.getMinGapLat(typ),
+                         "maxSpeedLat": t.vehicletype.getMaxSpeedLat(typ),
+                         "imperfection": t.vehicletype.getImperfection(typ), **lc}}
+            t.close()
+        print(json.dumps(res))
+    """)
+    free_hdv = out["free"]
+    assert free_hdv["tau"] == pytest.approx(spec.HDV_TAU_S)
+    assert free_hdv["imperfection"] == pytest.approx(spec.HDV_SIGMA)
+    assert free_hdv["minGapLat"] == pytest.approx(spec.HDV_MIN_GAP_LAT_M)
+    assert free_hdv["maxSpeedLat"] == pytest.approx(spec.HDV_MAX_SPEED_LAT_MPS)
+    assert free_hdv["lcPushy"] == pytest.approx(spec.HDV_LC_PUSHY)
+    assert free_hdv["lcAssertive"] == pytest.approx(spec.HDV_LC_ASSERTIVE)
+    assert free_hdv["lcTimeToImpatience"] == pytest.approx(spec.HDV_LC_TIME_TO_IMPATIENCE_S)
+    assert out["lanes"]["tau"] == pytest.approx(spec.HDV_TAU_S)
+
+
+@pytest.mark.sumo
+def test_human_drivers_get_around_a_stopped_vehicle(tmp_path: Path) -> None:
+    """Issue 12's obstacle, human drivers only: a stopped vehicle 5 m x 3.4 m covering the
+    right third of a 1 km x 10.2 m road at s = 550 m, 4 000 veh/h. With SUMO's default
+    drivers some stood still for 244-274 s (calibrate_humans.py --sumo-defaults); the
+    calibrated ones get around it: nobody stands still for more than 30 s, the flow past
+    the obstacle is never zero in a 30 s interval after the warm-up, no collision."""
+    case = {
+        "scenario": {"name": "hdv_obstacle", "seed": 2, "duration_s": 240.0,
+                     "warmup_s": 120.0, "interval_s": 30.0},
+        "network": {"kind": "straight", "length_m": 1000.0},
+        "demand": {"inflow_vph": 4000.0, "cav_share": 0.0},
+        "obstacle": {"s_m": 550.0, "d_m": -3.4, "length_m": 5.0, "width_m": 3.4},
+        "outputs": {"zone_start_m": 100.0, "zone_end_m": 900.0},
+    }
+    env = {**os.environ, "PYTHONPATH": str(REPO),
+           "COSIM_NETWORK_CACHE": str(tmp_path / "nets")}
+    proc = subprocess.run([sys.executable, str(REPO / "tests" / "sumo_cases" / "run_case.py"),
+                           str(tmp_path / "out"), json.dumps(case)], capture_output=True,
+                          text=True, env=env, timeout=300, check=False)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    line = [x for x in proc.stdout.splitlines() if x.startswith("RESULT ")][-1]
+    s = json.loads(line[len("RESULT "):])["summary"]
+    assert s["max_standstill_s"] <= 30.0 and s["vehicles_stopped_long"] == 0
+    assert s["collisions_sumo_hdv_only"] == 0
+    import pandas as pd
+
+    past = pd.read_csv(tmp_path / "out" / "intervals.csv")["flow_x562.5_vph"]
+    assert len(past) == 4 and (past > 0).all()
+
+
+@pytest.mark.sumo
+def test_one_lane_carries_2000_to_2400_vph_with_the_calibrated_drivers() -> None:
+    """Road-limited lane capacity of the three-lane baseline: on a 1 km ring of three
+    3.4 m lanes (no entrance) with LC2013 human drivers, Edie's flow per lane near the
+    flow-density curve's maximum (24 and 27 veh/km per lane, 300 s after 300 s) lies in
+    2 000-2 400 veh/h (SUMO's default tau = 1 s: about 2 500-2 600 veh/h there)."""
+    flows = []
+    for k in (24.0, 27.0):
+        task = {"kind": "lane_ring", "k_lane_vpkm": k, "seed": 1, "length_m": 1000.0,
+                "lanes": 3, "lane_width_m": 3.4, "duration_s": 600.0, "warmup_s": 300.0}
+        proc = subprocess.run(
+            [sys.executable, str(REPO / "experiments" / "calibrate_humans.py"), "--child",
+             json.dumps(task)], capture_output=True, text=True, timeout=300, check=False,
+            env={**os.environ, "PYTHONPATH": str(REPO)})
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        r = json.loads([x for x in proc.stdout.splitlines() if x.startswith("RESULT ")][-1][7:])
+        assert r["collision_vehicles"] == 0
+        flows.append(r["q_lane_vph"])
+    assert 2000.0 <= max(flows) <= 2400.0, flows

@@ -27,6 +27,11 @@ from cosim.demand.spec import (
     CAV_TAU_S,
     DECEL_MPS2,
     EMERGENCY_DECEL_MPS2,
+    HDV_LC_ASSERTIVE,
+    HDV_LC_PUSHY,
+    HDV_LC_TIME_TO_IMPATIENCE_S,
+    HDV_MAX_SPEED_LAT_MPS,
+    HDV_MIN_GAP_LAT_M,
     HDV_PREFIX,
     HDV_SIGMA,
     HDV_TAU_S,
@@ -82,11 +87,41 @@ CAV_RGB = (31, 119, 180)
 HDV_RGB = (255, 127, 14)
 
 
+def lane_change_attributes(kind: str, lanes: bool) -> dict[str, str]:
+    """The lane-change attributes of a ``<vType>`` of ``kind`` (``"cav"`` or ``"hdv"``).
+
+    ``lanes=True`` (three_lane baseline): SUMO's LC2013 with its defaults for both kinds.
+    ``lanes=False`` (lane-free road): SUMO's sublane model SL2015 with
+    ``latAlignment="arbitrary"``; CAVs keep SUMO's lateral gap :data:`MIN_GAP_LAT_M`
+    (our controller drives them), human drivers get the calibrated lateral gap, lateral
+    speed, pushiness, assertiveness and impatience of :mod:`cosim.demand.spec`
+    (``HDV_*``; measured by experiments/calibrate_humans.py).
+    Values are strings, in the order they are written.
+    """
+    if lanes:
+        return {"laneChangeModel": "LC2013"}
+    attrs = {"laneChangeModel": "SL2015", "latAlignment": "arbitrary"}
+    if kind == CAV_PREFIX:
+        attrs.update(minGapLat=f"{MIN_GAP_LAT_M}", maxSpeedLat=f"{MAX_SPEED_LAT_MPS}")
+    else:
+        attrs.update(
+            minGapLat=f"{HDV_MIN_GAP_LAT_M}",  # m
+            maxSpeedLat=f"{HDV_MAX_SPEED_LAT_MPS}",  # m/s
+            lcPushy=f"{HDV_LC_PUSHY}",
+            lcAssertive=f"{HDV_LC_ASSERTIVE}",
+            lcTimeToImpatience=f"{HDV_LC_TIME_TO_IMPATIENCE_S}",  # s
+        )
+    return attrs
+
+
 def vtype_lines(demand: DemandSpec, lanes: bool) -> list[str]:
     """``<vType>`` elements: ``cav_<k>`` and ``hdv_<k>`` for every size class.
 
-    ``lanes=False`` (lane-free road) gives SUMO's sublane model SL2015 with
-    ``latAlignment="arbitrary"``; ``lanes=True`` (three_lane baseline) gives LC2013.
+    Car following is SUMO's Krauss model: CAVs with ``sigma = 0`` and ``tau =``
+    :data:`CAV_TAU_S`, human drivers with :data:`HDV_SIGMA` and :data:`HDV_TAU_S` on both
+    road kinds (the lane-free and three-lane human arms differ only in lanes). Lane
+    changing: :func:`lane_change_attributes` (``lanes=False``: lane-free road, SL2015;
+    ``lanes=True``: three_lane baseline, LC2013).
     CAV types are drawn in :data:`CAV_RGB` (blue), HDV types in :data:`HDV_RGB` (orange).
     """
     out = []
@@ -97,13 +132,8 @@ def vtype_lines(demand: DemandSpec, lanes: bool) -> list[str]:
         (HDV_PREFIX, HDV_RGB, HDV_SIGMA, HDV_TAU_S),
     ):
         colour = ",".join(str(c) for c in colour)
+        lc = " ".join(f'{k}="{v}"' for k, v in lane_change_attributes(kind, lanes).items())
         for k, (length, width, _p) in enumerate(demand.size_classes):
-            lc = (
-                'laneChangeModel="LC2013"'
-                if lanes
-                else f'laneChangeModel="SL2015" latAlignment="arbitrary" '
-                f'minGapLat="{MIN_GAP_LAT_M}" maxSpeedLat="{MAX_SPEED_LAT_MPS}"'
-            )
             out.append(
                 f'    <vType id="{kind}_{k}" vClass="passenger" length="{length}" '
                 f'width="{width}" minGap="{MIN_GAP_M}" accel="{ACCEL_MPS2}" '
