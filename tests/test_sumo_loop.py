@@ -344,3 +344,24 @@ def test_fast_reference_tracking_relieves_the_safety_layer_in_ring_congestion(tm
     assert slow["safety_speed_activations"] > 1000 and slow["tet_share"] > 1e-3
     assert fast["safety_speed_activations"] == 0 and fast["tet_share"] == 0.0
     assert fast["edie_flow_vph"] > 1.05 * slow["edie_flow_vph"]
+
+
+def test_an_obstacle_on_three_lanes_stands_in_the_lane_its_d_names(tmp_path, sumo_env):
+    """obstacle.d_m is the road frame's d on every kind: on three 3.4 m lanes, d = -3.4 m
+    is the right lane's centre. SUMO must hold the stopped car there (before, it stood in
+    lane 0 at another offset than the one recorded, and our geometric check saw hundreds
+    of collisions SUMO did not); the drivers pass it in the other lanes without any."""
+    r = _scenario(tmp_path, {
+        "scenario": {"name": "three_lane_obstacle", "seed": 3, "duration_s": 80.0,
+                     "warmup_s": 20.0, "interval_s": 30.0},
+        "network": {"kind": "three_lane", "length_m": 600.0},
+        "demand": {"inflow_vph": 2400.0, "cav_share": 0.0},
+        "controller": {"kind": "sumo"},
+        "obstacle": {"s_m": 300.0, "d_m": -3.4, "length_m": 5.0, "width_m": 2.0},
+        "outputs": {"sumo_collisions": True, "zone_start_m": 50.0, "zone_end_m": 550.0},
+    }, sumo_env)
+    s = r["summary"]
+    for key in ("collisions_sumo_hdv_only", "collisions_geometric_hdv_only"):
+        assert s[key] == 0, key
+    assert s["min_gap_m"] > 0.0
+    assert s["flow_x312.5_vph"] > 1000.0  # traffic passes it

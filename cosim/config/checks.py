@@ -62,7 +62,9 @@ def check_scenario(sc: Scenario) -> None:
         _check_widths(sc, min(widths))
     length = road_length_m(sc)
     if length is not None:
-        _check_obstacle(sc, length, min(widths) if widths else None)
+        road_width = (sc.network.width_m if sc.network.kind == "three_lane"
+                      else min(widths) if widths else None)
+        _check_obstacle(sc, length, road_width)
     _check_obstacle_joints(sc)
 
 

@@ -285,22 +285,30 @@ class SumoWorld:
         ts.vehicletype.setLength(type_id, length_m)
         ts.vehicletype.setWidth(type_id, width_m)
         ts.vehicletype.setMinGap(type_id, 0.0)
+        lane = self._obstacle_lane(edge, d_m)
         ts.route.add("obstacle_route", [edge])
         ts.vehicle.add("obstacle", "obstacle_route", typeID=type_id, departPos=str(pos),
-                       departSpeed="0", departLane="0")
+                       departSpeed="0", departLane=lane.rsplit("_", 1)[1])
         ts.vehicle.setSpeedMode("obstacle", 0)
         ts.vehicle.setLaneChangeMode("obstacle", 0)
         ts.vehicle.setSpeed("obstacle", 0.0)
-        self._obstacle = (edge, pos, d_m)
+        self._obstacle = (lane, pos, d_m)
         self.obstacle_id = "obstacle"
         return "obstacle"
+
+    def _obstacle_lane(self, edge: str, d_m: float) -> str:
+        """The lane of ``edge`` whose centre is nearest to ``d_m`` (the road frame's d, m):
+        lane 0 of a one-lane road; on three lanes, the lane the obstacle stands in."""
+        lanes = [x for x in self.net.lane_d if x.rsplit("_", 1)[0] == edge]
+        if not lanes:
+            return f"{edge}_0"
+        return min(lanes, key=lambda x: abs(self.net.lane_d[x] - d_m))
 
     def _hold_obstacle(self) -> None:
         """Keep the obstacle vehicle in place (every step after it departed)."""
         if self._obstacle is None:
             return
         if "obstacle" in self.types:
-            edge, pos, d_m = self._obstacle
-            lane = f"{edge}_0"
+            lane, pos, d_m = self._obstacle
             self.ts.vehicle.setSpeed("obstacle", 0.0)
             self.ts.vehicle.setLateralLanePosition("obstacle", d_m - self.net.lane_d.get(lane, 0))
