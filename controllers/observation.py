@@ -96,28 +96,50 @@ class RoadProfile:
     def edges(self, s: np.ndarray) -> np.ndarray:
         """Edges (N, 2) m ``[right, left]`` at positions ``s`` (N,) m (clamped at the ends)."""
         s = np.asarray(s, dtype=float)
+        if self.is_constant:  # one piece: its edges everywhere
+            out = np.empty((len(s), 2))
+            out[:, 0] = self.right[0]
+            out[:, 1] = self.left[0]
+            return out
         if self.periodic:
             s = np.mod(s, self.length_m)
         k = np.clip(np.searchsorted(self.s0, s, side="right") - 1, 0, len(self.s0) - 1)
-        return np.column_stack([self.right[k], self.left[k]])
+        out = np.empty((len(s), 2))
+        out[:, 0] = self.right[k]
+        out[:, 1] = self.left[k]
+        return out
 
     def narrowest(self, s: np.ndarray, ahead_m: np.ndarray | float) -> np.ndarray:
-        """Narrowest edges (N, 2) m over ``[s, s + ahead_m]``: max right, min left edge."""
+        """Narrowest edges (N, 2) m over ``[s, s + ahead_m]``: max right, min left edge.
+
+        One (N, K) pass over the K pieces (K is small: the road's width changes), the
+        pieces that ``[s, s + ahead]`` touches (and, on a ring, the same pieces one lap on).
+        """
         s = np.asarray(s, dtype=float)
-        ahead = np.broadcast_to(np.asarray(ahead_m, dtype=float), s.shape)
         out = self.edges(s)
         if self.is_constant:
             return out
-        end = s + ahead
-        for k in range(len(self.s0)):
-            start = self.s0[k]
-            stop = self.s0[k + 1] if k + 1 < len(self.s0) else np.inf
-            hits = (stop > s) & (start <= end)
-            if self.periodic:  # the piece one lap on, seen across the seam
-                hits |= (stop + self.length_m > s) & (start + self.length_m <= end)
-            out[hits, 0] = np.maximum(out[hits, 0], self.right[k])
-            out[hits, 1] = np.minimum(out[hits, 1], self.left[k])
+        ahead = np.broadcast_to(np.asarray(ahead_m, dtype=float), s.shape)
+        end = (s + ahead)[:, None]
+        start = self.s0[None, :]
+        stop = np.append(self.s0[1:], np.inf)[None, :]
+        col = s[:, None]
+        hits = (stop > col) & (start <= end)
+        if self.periodic:  # the piece one lap on, seen across the seam
+            hits |= (stop + self.length_m > col) & (start + self.length_m <= end)
+        right = np.max(np.where(hits, self.right[None, :], -np.inf), axis=1)
+        left = np.min(np.where(hits, self.left[None, :], np.inf), axis=1)
+        out[:, 0] = np.maximum(out[:, 0], right)
+        out[:, 1] = np.minimum(out[:, 1], left)
         return out
+
+
+def _as_n(v: np.ndarray, n: int) -> np.ndarray:
+    """``v`` as an (n,) array: itself when it has that shape, else broadcast (a scalar or
+    a (1,) array: a read-only view)."""
+    if v.shape == (n,):
+        return v
+    return np.broadcast_to(v, (n,))
 
 
 @dataclass(frozen=True)
@@ -190,7 +212,7 @@ class Observation:
                 v = np.asarray(v, dtype=float)
                 if v.shape not in ((), (1,), (n,)):
                     raise ValueError(f"{name} must have shape ({n},), got {v.shape}")
-                object.__setattr__(self, name, np.broadcast_to(v, (n,)))
+                object.__setattr__(self, name, _as_n(v, n))
         if self.others_q is not None:
             oq = np.asarray(self.others_q, dtype=float)
             if oq.size == 0:
@@ -207,7 +229,7 @@ class Observation:
                 v = np.zeros(len(oq)) if v is None else np.asarray(v, dtype=float)
                 if v.shape not in ((), (1,), (len(oq),)):
                     raise ValueError(f"{name} must have shape ({len(oq)},), got {v.shape}")
-                object.__setattr__(self, name, np.broadcast_to(v, (len(oq),)))
+                object.__setattr__(self, name, _as_n(v, len(oq)))
         if self.road_edges is not None:
             re = np.asarray(self.road_edges, dtype=float)
             re = np.broadcast_to(re, (n, 2)) if re.shape == (2,) else re
@@ -222,7 +244,7 @@ class Observation:
                     raise ValueError(f"{name} must have shape ({q.shape[1]},) or {q.shape}")
                 object.__setattr__(self, name, v)
         if self.desired_speed is not None:
-            v = np.broadcast_to(np.asarray(self.desired_speed, dtype=float), (n,))
+            v = _as_n(np.asarray(self.desired_speed, dtype=float), n)
             object.__setattr__(self, "desired_speed", v)
         if self.period_s is not None and not self.period_s > 0:
             raise ValueError("period_s must be > 0")

@@ -238,7 +238,7 @@ def _load_builtins() -> None:
     register(LawEntry(
         kind="flocking",
         description="lane-free flocking: car following, lateral purpose, cooperation "
-                    "(controllers/road/lanefree.py)",
+                    "(controllers/road/lanefree/)",
         params_type=lanefree.LaneFreeParams,
         defaults={},
         build=lambda p, ctx: _with_comm(lanefree.LaneFreeFlocking(p, ctx), ctx),

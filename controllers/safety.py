@@ -31,15 +31,21 @@ Rules, applied in this order to CAV ``i`` with command ``u_i``:
    reaction delay ``tau``, braking itself at ``b`` (the emergency deceleration).
 
 Every activation is counted per rule.
+
+The rules run in one compiled loop per CAV (numba, :func:`_apply_kernel`) over the
+vehicles within reach, found in a window of the vehicles sorted along the road (no pair
+arrays); it computes what the vectorised numpy form of the layer computed
+(``tests/test_exactness.py``).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
-from .neighbours import cross_pairs
 from .params import ParameterError
 
 
@@ -206,97 +212,177 @@ class SafetyLayer:
             apply and the lateral speed for the next step (m/s).
         """
         c = self.config
-        dt = c.dt
         n = len(cav_index)
         u = np.array(u, dtype=float, copy=True)
         self.counts.seen += n
         if n == 0:
             return u, np.zeros(0)
-        s, d, v = road.s[cav_index], road.d[cav_index], road.v[cav_index]
-        L, W = road.length[cav_index], road.width[cav_index]
-
-        # 1. road edges ------------------------------------------------------------
-        vl = np.clip(v_lat + u[:, 1] * dt, -c.lat_speed_max_mps, c.lat_speed_max_mps)
-        lo = edges[:, 0] + 0.5 * W + c.edge_margin_m
-        hi = edges[:, 1] - 0.5 * W - c.edge_margin_m
-        room_left = np.maximum(hi - d, 0.0)
-        room_right = np.maximum(d - lo, 0.0)
-        cap_left = np.sqrt(2.0 * c.lat_accel_mps2 * room_left)
-        cap_right = np.sqrt(2.0 * c.lat_accel_mps2 * room_right)
-        vl_edge = np.clip(vl, -cap_right, cap_left)
-        # Outside the allowed band already (e.g. entering a narrowing): steer back in
-        # at the lateral acceleration limit.
-        back_in = np.clip(v_lat - c.lat_accel_mps2 * dt, -c.lat_speed_max_mps, 0.0)
-        back_out = np.clip(v_lat + c.lat_accel_mps2 * dt, 0.0, c.lat_speed_max_mps)
-        vl_edge = np.where(d > hi, np.minimum(vl_edge, back_in), vl_edge)
-        vl_edge = np.where(d < lo, np.maximum(vl_edge, back_out), vl_edge)
-        d_next = d + vl_edge * dt
-        d_next = np.clip(d_next, np.minimum(lo, d), np.maximum(hi, d))
-        vl_edge = (d_next - d) / dt
-        self.counts.edge += int(np.count_nonzero(np.abs(vl_edge - vl) > 1e-9))
-
-        # neighbours within a longitudinal reach ------------------------------------
+        cav_index = np.asarray(cav_index, dtype=np.int64)
+        v = road.v[cav_index]
+        # neighbours within a longitudinal reach
         reach = float(np.max(v)) * c.tau + float(np.max(v)) ** 2 / (2 * c.own_decel_mps2)
         reach += float(np.max(road.length)) + c.min_gap_m + 10.0
-        xy_all = np.column_stack([road.s, road.d])
-        pairs = cross_pairs(np.column_stack([s, d]), xy_all, reach, period)
-        pairs = pairs[cav_index[pairs[:, 0]] != pairs[:, 1]]
-        i, j = pairs[:, 0], pairs[:, 1]
-        ds = road.s[j] - s[i]
-        if period is not None:
-            ds = (ds + 0.5 * period) % period - 0.5 * period
-        half_l = 0.5 * (L[i] + road.length[j])
-        half_w = 0.5 * (W[i] + road.width[j])
-
-        # 2. side clearance ----------------------------------------------------------
-        # Longitudinal overlap with a buffer for closing speed (cut-in protection).
-        closing_ahead = np.maximum(v[i] - road.v[j], 0.0)  # i catches j ahead
-        closing_behind = np.maximum(road.v[j] - v[i], 0.0)  # j catches i from behind
-        buf = np.where(ds >= 0, closing_ahead, closing_behind) * c.cut_in_time_s + c.min_gap_m
-        beside = np.abs(ds) < half_l + buf
-        # Cut-in: the follower of the pair, were they in one band, must already be
-        # within its Krauss safe speed (rule 3) of the other.
-        ahead_j = ds >= 0
-        v_follow = np.where(ahead_j, v[i], road.v[j])
-        v_lead = np.where(ahead_j, road.v[j], v[i])
-        gap_pair = np.abs(ds) - half_l - c.min_gap_m
-        beside |= v_follow > krauss_safe_speed(gap_pair, v_lead, c) + 1e-9
-        dd = road.d[j] - d[i]
-        # Worst-case lateral step of the neighbour towards i during this step.
-        shift = np.zeros(len(road.s)) if road.v_lat is None else np.abs(road.v_lat) * dt
-        shift[cav_index] = c.lat_speed_max_mps * dt
-        need = half_w + c.lateral_clearance_m + shift[j]
-        hi_side = np.full(n, np.inf)
-        lo_side = np.full(n, -np.inf)
-        left = beside & (dd >= 0)
-        right = beside & (dd < 0)
-        np.minimum.at(hi_side, i[left], road.d[j[left]] - need[left])
-        np.maximum.at(lo_side, i[right], road.d[j[right]] + need[right])
-        d_side = np.clip(d_next, np.minimum(lo_side, d), np.maximum(hi_side, d))
-        moved = np.abs(d_side - d_next) > 1e-9
-        self.counts.side += int(np.count_nonzero(moved))
-        d_next = d_side
-        v_lat_next = (d_next - d) / dt
-
-        # 3. safe speed ----------------------------------------------------------------
-        d_lo = np.minimum(d, d_next)
-        d_hi = np.maximum(d, d_next)
-        lat_gap = np.maximum(road.d[j] - d_hi[i], d_lo[i] - road.d[j]) - half_w
-        ahead = (ds > 0) & (lat_gap < c.lateral_clearance_m)
-        gap = ds - half_l - c.min_gap_m
-        v_safe_pair = krauss_safe_speed(gap, road.v[j], c)
-        v_safe = np.full(n, np.inf)
-        np.minimum.at(v_safe, i[ahead], v_safe_pair[ahead])
-        if wall_gap is not None:
-            finite = np.isfinite(wall_gap)
-            v_wall = krauss_safe_speed(np.where(finite, wall_gap - 0.5, 0.0), np.zeros(n), c)
-            v_safe = np.where(finite, np.minimum(v_safe, v_wall), v_safe)
-        u_max = (v_safe - v) / dt
-        u_long = np.minimum(u[:, 0], u_max)
-        u_long = np.maximum(u_long, -c.own_decel_mps2)
-        # Never command a negative next speed.
-        u_long = np.maximum(u_long, -v / dt)
-        self.counts.speed += int(np.count_nonzero(u_long < u[:, 0] - 1e-9))
-        u[:, 0] = u_long
-        u[:, 1] = (v_lat_next - v_lat) / dt
+        m = len(road.s)
+        periodic = period is not None
+        key = np.mod(road.s, period) if periodic else road.s
+        order = np.argsort(key, kind="stable")
+        key = key[order]
+        if periodic:  # copies one period below and above close the ring
+            key = np.concatenate([key - period, key, key + period])
+        is_cav = np.zeros(m, bool)
+        is_cav[cav_index] = True
+        has_wall = wall_gap is not None
+        v_lat_next, counts = _apply_kernel(
+            u, cav_index, _f64(v_lat), _f64(road.s), _f64(road.d), _f64(road.v),
+            _f64(road.length), _f64(road.width),
+            np.zeros(m) if road.v_lat is None else _f64(road.v_lat), is_cav, _f64(edges),
+            periodic, float(period) if periodic else 0.0, order, key,
+            _f64(wall_gap) if has_wall else np.zeros(0), has_wall, reach, _scalars(c))
+        self.counts.edge += int(counts[0])
+        self.counts.side += int(counts[1])
+        self.counts.speed += int(counts[2])
         return u, v_lat_next
+
+
+def _f64(x) -> np.ndarray:
+    return np.ascontiguousarray(x, dtype=float)
+
+
+def _scalars(c: SafetyConfig) -> np.ndarray:
+    """The layer's scalars for :func:`_apply_kernel`, folded as the numpy rules folded them."""
+    b = c.own_decel_mps2
+    return np.array([
+        c.dt, c.min_gap_m, c.lateral_clearance_m, c.edge_margin_m, b, c.leader_decel_mps2,
+        c.lat_speed_max_mps, c.cut_in_time_s, (b * c.tau) ** 2, -b * c.tau, 2.0 * b,
+        2.0 * c.lat_accel_mps2, c.lat_accel_mps2 * c.dt, c.lat_speed_max_mps * c.dt,
+    ])
+
+
+@njit(cache=True, inline="always")
+def _krauss(g, v_l, bt2, mbt, b, bl, two_b):
+    """:func:`krauss_safe_speed` of one pair, m/s (the same operations in the same order)."""
+    root = math.sqrt(max(bt2 + v_l * v_l * b / bl + two_b * g, 0.0))
+    return 0.0 if g < 0 else mbt + root
+
+
+@njit(cache=True)
+def _apply_kernel(u, cav_index, v_lat, s_all, d_all, v_all, len_all, wid_all, vlat_all,
+                  is_cav, edges, periodic, period, order, key, wall_gap, has_wall, reach, C):
+    """The three rules for every CAV (see :meth:`SafetyLayer.apply`), ``u`` (N, 2) changed
+    in place; returns (v_lat_next (N,) m/s, counts (3,): edge, side and speed rule
+    activations).
+
+    Neighbours: every other vehicle whose centre lies closer than ``reach`` (m; Euclidean
+    in the road frame, wrapped on a ring of length ``period``), found in a window of the
+    vehicles sorted along the road (``order``; ``key`` their sorted ``s``, modulo the
+    period on a ring, there in three copies, one period apart), as
+    :func:`controllers.neighbours.strip_cross_pairs` finds them. A ring shorter than twice
+    the reach is scanned whole (each vehicle once). All reductions are minima and maxima:
+    the order of the pairs does not matter.
+    """
+    dt, min_gap, lat_clear, edge_margin, b, bl = C[0], C[1], C[2], C[3], C[4], C[5]
+    lsm, cut_in, bt2, mbt, two_b = C[6], C[7], C[8], C[9], C[10]
+    two_la, la_dt, shift_cav = C[11], C[12], C[13]
+    n = cav_index.shape[0]
+    m = s_all.shape[0]
+    v_lat_next = np.empty(n)
+    counts = np.zeros(3, np.int64)
+    r2 = reach * reach
+    scan_all = periodic and not (period > 2.0 * reach)
+    for i in range(n):
+        ci = cav_index[i]
+        s, d, v = s_all[ci], d_all[ci], v_all[ci]
+        L, W = len_all[ci], wid_all[ci]
+        u0 = u[i, 0]
+        # 1. road edges ----------------------------------------------------------------
+        vl = min(max(v_lat[i] + u[i, 1] * dt, -lsm), lsm)
+        lo = edges[i, 0] + 0.5 * W + edge_margin
+        hi = edges[i, 1] - 0.5 * W - edge_margin
+        cap_left = math.sqrt(two_la * max(hi - d, 0.0))
+        cap_right = math.sqrt(two_la * max(d - lo, 0.0))
+        vl_edge = min(max(vl, -cap_right), cap_left)
+        back_in = min(max(v_lat[i] - la_dt, -lsm), 0.0)
+        back_out = min(max(v_lat[i] + la_dt, 0.0), lsm)
+        if d > hi:
+            vl_edge = min(vl_edge, back_in)
+        if d < lo:
+            vl_edge = max(vl_edge, back_out)
+        d_next = d + vl_edge * dt
+        d_next = min(max(d_next, min(lo, d)), max(hi, d))
+        vl_edge = (d_next - d) / dt
+        if abs(vl_edge - vl) > 1e-9:
+            counts[0] += 1
+        # the window of candidates
+        if scan_all:
+            e0, e1 = 0, m
+        else:
+            x = s % period if periodic else s
+            e0 = np.searchsorted(key, x - reach, side="right")
+            e1 = np.searchsorted(key, x + reach, side="left")
+        # 2. side clearance (first pass over the neighbours) -------------------------------
+        hi_side = np.inf
+        lo_side = -np.inf
+        for e in range(e0, e1):
+            j = order[e % m]
+            if j == ci:
+                continue
+            ds = s_all[j] - s
+            if periodic:
+                ds = (ds + 0.5 * period) % period - 0.5 * period
+            dd = d_all[j] - d
+            if not (ds * ds + dd * dd < r2):
+                continue
+            half_l = 0.5 * (L + len_all[j])
+            v_j = v_all[j]
+            if ds >= 0:
+                buf = max(v - v_j, 0.0) * cut_in + min_gap
+                v_follow, v_lead = v, v_j
+            else:
+                buf = max(v_j - v, 0.0) * cut_in + min_gap
+                v_follow, v_lead = v_j, v
+            beside = abs(ds) < half_l + buf
+            gap_pair = abs(ds) - half_l - min_gap
+            if v_follow > _krauss(gap_pair, v_lead, bt2, mbt, b, bl, two_b) + 1e-9:
+                beside = True
+            if beside:
+                half_w = 0.5 * (W + wid_all[j])
+                shift = shift_cav if is_cav[j] else abs(vlat_all[j]) * dt
+                need = half_w + lat_clear + shift
+                if dd >= 0:
+                    hi_side = min(hi_side, d_all[j] - need)
+                else:
+                    lo_side = max(lo_side, d_all[j] + need)
+        d_side = min(max(d_next, min(lo_side, d)), max(hi_side, d))
+        if abs(d_side - d_next) > 1e-9:
+            counts[1] += 1
+        d_next = d_side
+        vln = (d_next - d) / dt
+        v_lat_next[i] = vln
+        # 3. safe speed (second pass) -----------------------------------------------------
+        d_lo = min(d, d_next)
+        d_hi = max(d, d_next)
+        v_safe = np.inf
+        for e in range(e0, e1):
+            j = order[e % m]
+            if j == ci:
+                continue
+            ds = s_all[j] - s
+            if periodic:
+                ds = (ds + 0.5 * period) % period - 0.5 * period
+            dd = d_all[j] - d
+            if not (ds * ds + dd * dd < r2) or not ds > 0:
+                continue
+            lat_gap = max(d_all[j] - d_hi, d_lo - d_all[j]) - 0.5 * (W + wid_all[j])
+            if lat_gap < lat_clear:
+                gap = ds - 0.5 * (L + len_all[j]) - min_gap
+                v_safe = min(v_safe, _krauss(gap, v_all[j], bt2, mbt, b, bl, two_b))
+        if has_wall and np.isfinite(wall_gap[i]):
+            v_safe = min(v_safe, _krauss(wall_gap[i] - 0.5, 0.0, bt2, mbt, b, bl, two_b))
+        u_long = min(u0, (v_safe - v) / dt)
+        u_long = max(u_long, -b)
+        u_long = max(u_long, -v / dt)
+        if u_long < u0 - 1e-9:
+            counts[2] += 1
+        u[i, 0] = u_long
+        u[i, 1] = (vln - v_lat[i]) / dt
+    return v_lat_next, counts

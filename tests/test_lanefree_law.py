@@ -1,4 +1,4 @@
-"""The lane-free flocking law (controllers/road/lanefree.py): string stability, overtaking,
+"""The lane-free flocking law (controllers/road/lanefree/): string stability, overtaking,
 obstacles, narrowings, dense rings, cooperation, parameters.
 
 Everything here runs without SUMO: the law alone on hand-made observations, or whole runs

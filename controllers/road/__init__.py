@@ -3,7 +3,7 @@
 Each module adapts one law to the road observation (road frame, sensed vehicles,
 road edges, desired speeds) and keeps the law's road-specific glue with the law:
 
-    lanefree.py          ``flocking`` (default): lane-free flocking for roads
+    lanefree/            ``flocking`` (default): lane-free flocking for roads
     timegap_flocking.py  ``flocking_timegap``: Olfati-Saber with a time-gap reference
                          (the previous default, kept for comparison)
     boundary_points.py   ``boundary_points``: seed 003's law with sensed vehicles as

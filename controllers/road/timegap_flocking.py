@@ -12,7 +12,7 @@ law (``controller.kind = "flocking_timegap"``). Each step:
 4. lateral damping ``u_lat -= c_d v_lat``, clipped to the lateral limit.
 
 Measured (README): it drives in invisible lanes (no lateral purpose) and is string
-unstable with the default ``c2_gamma``; see ``controllers/road/lanefree.py``.
+unstable with the default ``c2_gamma``; see ``controllers/road/lanefree/``.
 """
 
 from __future__ import annotations

@@ -55,7 +55,7 @@ class StepData:
     Attributes:
         k: step number (0 is the first step); t: time after the step, s.
         state: all vehicles after the step.
-        cav_rows: (N,) rows of the controlled CAVs in ``state``.
+        cav_rows: (N,) rows of the controlled CAVs in ``state``; cav_ids: their ids.
         obs: the CAVs' observation.
         u_law: (N, 2) the law's command, m/s^2; u: after constraints and safety.
         v_next, d_next, v_lat_next: (N,) the commands applied, m/s, m, m/s.
@@ -65,6 +65,7 @@ class StepData:
     t: float = 0.0
     state: RoadSnapshot | None = None
     cav_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    cav_ids: list = field(default_factory=list)
     obs: Observation | None = None
     u_law: np.ndarray | None = None
     u: np.ndarray | None = None
@@ -192,26 +193,29 @@ class Loop:
         rows = np.flatnonzero(state.is_cav & state.on_main & ~state.is_static)
         st.cav_rows = rows
         if len(rows):
-            self.world.take_over([state.ids[r] for r in rows])
+            all_ids = state.ids
+            st.cav_ids = [all_ids[r] for r in rows.tolist()]
+            self.world.take_over(st.cav_ids)
 
     def _reference(self, st: StepData) -> None:
         state, rows = st.state, st.cav_rows
         others = np.flatnonzero(~(state.is_cav & state.on_main & ~state.is_static)
                                 & np.isfinite(state.s))
-        q = np.column_stack([state.s[rows], state.d[rows]])
-        p = np.column_stack([state.v[rows], state.v_lat[rows]])
+        q = _pair(state.s, state.d, rows)
+        p = _pair(state.v, state.v_lat, rows)
         desired = state.desired[rows]
         desired = np.where(np.isfinite(desired), desired, self.world.speed_limit_mps)
         b = self.limits.emergency_decel_mps2
         stop = p[:, 0] * self.dt + p[:, 0] ** 2 / (2 * b) + EDGE_MARGIN_AHEAD_M
         edges = self.world.road.narrowest(q[:, 0], stop)
+        all_ids = state.ids
         st.obs = Observation(
-            q=q, p=p, t=st.t, dt=self.dt, ids=np.array([state.ids[r] for r in rows], dtype=object),
+            q=q, p=p, t=st.t, dt=self.dt, ids=_objects(st.cav_ids),
             length=state.length[rows], width=state.width[rows],
-            others_q=np.column_stack([state.s[others], state.d[others]]),
-            others_p=np.column_stack([state.v[others], state.v_lat[others]]),
+            others_q=_pair(state.s, state.d, others),
+            others_p=_pair(state.v, state.v_lat, others),
             others_length=state.length[others], others_width=state.width[others],
-            others_ids=np.array([state.ids[r] for r in others], dtype=object),
+            others_ids=_objects([all_ids[r] for r in others.tolist()]),
             road_edges=edges, period_s=self.world.period, desired_speed=desired,
             road=self.world.road,
         )
@@ -238,10 +242,17 @@ class Loop:
             st.v_lat_next = np.clip(obs.p[:, 1] + st.u[:, 1] * self.dt, -lim, lim)
             return
         state = st.state
-        on_road = np.flatnonzero(np.isfinite(state.s))
-        pos = np.searchsorted(on_road, st.cav_rows)
-        road = RoadState(state.s[on_road], state.d[on_road], state.v[on_road],
-                         state.length[on_road], state.width[on_road], state.v_lat[on_road])
+        finite = np.isfinite(state.s)
+        if finite.all():  # everyone on the road (the usual case): no copies
+            pos = st.cav_rows
+            road = RoadState(state.s, state.d, state.v, state.length, state.width,
+                             state.v_lat)
+        else:
+            on_road = np.flatnonzero(finite)
+            pos = np.searchsorted(on_road, st.cav_rows)
+            road = RoadState(state.s[on_road], state.d[on_road], state.v[on_road],
+                             state.length[on_road], state.width[on_road],
+                             state.v_lat[on_road])
         st.u, st.v_lat_next = self.safety.apply(st.u, pos, obs.p[:, 1], road, obs.road_edges,
                                                 self.world.period, self._wall_gap(obs))
 
@@ -267,4 +278,17 @@ class Loop:
         st.d_next = obs.q[:, 1] + st.v_lat_next * self.dt
 
     def _apply(self, st: StepData) -> None:
-        self.world.apply(list(st.obs.ids), st.v_next, st.d_next, st.v_lat_next)
+        self.world.apply(st.obs.ids.tolist(), st.v_next, st.d_next, st.v_lat_next)
+
+
+def _pair(a: np.ndarray, b: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``np.column_stack([a[rows], b[rows]])`` (len(rows), 2), without the temporaries."""
+    out = np.empty((len(rows), 2))
+    out[:, 0] = a[rows]
+    out[:, 1] = b[rows]
+    return out
+
+
+def _objects(items: list) -> np.ndarray:
+    """A 1-d object array of ``items`` (ids)."""
+    return np.fromiter(items, dtype=object, count=len(items))

@@ -14,6 +14,7 @@ default Euler update); the lateral double integrator is integrated here as
 from __future__ import annotations
 
 import contextlib
+import operator
 import os
 import sys
 import tempfile
@@ -26,6 +27,15 @@ from cosim.sim.world import RoadSnapshot
 from cosim.sumo.binaries import sumo_binary
 
 _VARS = None
+_GETTER = None
+
+
+def _row_getter():
+    """``operator.itemgetter`` of the subscribed variables, in :func:`_vars` order."""
+    global _GETTER
+    if _GETTER is None:
+        _GETTER = operator.itemgetter(*_vars())
+    return _GETTER
 
 
 def _vars():
@@ -109,6 +119,9 @@ class SumoWorld:
         self._lane_info: dict[str, tuple[float, float, bool]] = {}  # offset, lane d, on main
         self._lane_of: dict[str, str] = {}
         self._pos_of: dict[str, float] = {}
+        self._lane_main: dict[str, bool] = {}  # lane id -> on the main route
+        self._static_ids: list | None = None  # the vehicles of _static_cols, in order
+        self._static_cols: tuple = ()
         self.departed_now: list[str] = []
         self.arrived_now: list[str] = []
         self.controlled: set[str] = set()
@@ -195,41 +208,51 @@ class SumoWorld:
         return info
 
     def observe(self) -> RoadSnapshot:
-        """All vehicles on the network, in the road frame (centre positions)."""
+        """All vehicles on the network, in the road frame (centre positions).
+
+        Built column by column from the subscription results (no per-vehicle row tuples);
+        the static columns (size, CAV or not, desired speed) are reused while the set of
+        vehicles is the same as in the previous step.
+        """
         res = self.ts.vehicle.getAllSubscriptionResults()
-        v_lane, v_pos, v_lat, v_speed, v_slat = _vars()
-        ids = list(res.keys())
+        ids = list(res)
         n = len(ids)
-        lane = [None] * n
-        rows = [None] * n
-        static = self._static
-        lane_info = self._lane
-        vlat_state = self.v_lat_state
-        for k, vid in enumerate(ids):
-            r = res[vid]
-            ln = r[v_lane]
-            lane[k] = ln
-            off, ld, main = lane_info(ln)
-            length, width, cav, desired = static[vid]
-            rows[k] = (r[v_pos], r[v_lat], r[v_speed], vlat_state.get(vid, r[v_slat]),
-                       length, width, off, ld, main, cav, desired)
+        if n:
+            lane, pos_l, lat, speed, slat = zip(*map(_row_getter(), res.values()), strict=True)
+        else:
+            lane = pos_l = lat = speed = slat = ()
+        pos = np.array(pos_l, dtype=float).reshape(n)
+        lat = np.array(lat, dtype=float).reshape(n)
+        speed = np.array(speed, dtype=float).reshape(n)
+        # a controlled CAV's lateral speed is the one the loop integrated
+        v_lat_now = np.array(list(map(self.v_lat_state.get, ids, slat)),
+                             dtype=float).reshape(n)
+        if ids != self._static_ids:
+            static = self._static
+            cols = np.array([static[vid] for vid in ids], dtype=float).reshape(n, 4)
+            self._static_cols = (cols[:, 0].copy(), cols[:, 1].copy(), cols[:, 2] > 0,
+                                 cols[:, 3].copy())
+            self._static_ids = ids
+        length, width, is_cav, desired = self._static_cols
+        main = list(map(self._lane_main.get, lane))
+        if None in main:
+            main = [self._lane(ln)[2] for ln in lane]
+            self._lane_main.update(zip(lane, main, strict=True))
         self._lane_of = dict(zip(ids, lane, strict=True))
         if self._on_ramp:
             self._release_ramp()
-        arr = np.array(rows, dtype=float).reshape(n, 11)
-        self._pos_of = dict(zip(ids, arr[:, 0].tolist(), strict=True))
+        self._pos_of = dict(zip(ids, pos_l, strict=True))
         # (lane, position, lateral position) -> (s, d): the lanes' real geometry
-        s_front, d_front = self.net.lane_frame(lane, arr[:, 0], arr[:, 1])
-        s = s_front - 0.5 * arr[:, 4]
+        s_front, d_front = self.net.lane_frame(lane, pos, lat)
+        s = s_front - 0.5 * length
         if self.period is not None:
             s = np.mod(s, self.period)
-        on_main = (arr[:, 8] > 0) & ~np.isnan(s)
+        on_main = np.array(main, dtype=bool).reshape(n) & ~np.isnan(s)
         is_static = np.zeros(n, dtype=bool)
         if self.obstacle_id is not None and self.obstacle_id in self._lane_of:
             is_static[ids.index(self.obstacle_id)] = True
-        return RoadSnapshot(ids, s, s_front, d_front, arr[:, 2], arr[:, 3],
-                            arr[:, 4], arr[:, 5], arr[:, 9] > 0, on_main, is_static,
-                            arr[:, 10])
+        return RoadSnapshot(ids, s, s_front, d_front, speed, v_lat_now, length.copy(),
+                            width.copy(), is_cav.copy(), on_main, is_static, desired.copy())
 
     def _release_ramp(self) -> None:
         """Give vehicles that reached the main road back their lane-change model."""
@@ -253,16 +276,36 @@ class SumoWorld:
 
     def apply(self, ids: list, v_next: np.ndarray, d_next: np.ndarray,
               v_lat_next: np.ndarray) -> None:
-        """Command next speeds (m/s) and lateral positions (road frame, m) of CAVs."""
+        """Command next speeds (m/s) and lateral positions (road frame, m) of CAVs.
+
+        Every CAV gets both setters every step (``setSpeed`` persists in SUMO, so skipping
+        an unchanged one would be exact, but benchmarks/bench_floor.py measured 1 %: not
+        worth its bookkeeping); libsumo's functions are called directly, without the
+        wrapper layer of its Python module (the same C++ calls).
+        """
         veh = self.ts.vehicle
-        lanes = [self._lane_of[i] for i in ids]
-        pos = np.fromiter((self._pos_of[i] for i in ids), dtype=float, count=len(ids))
+        lane_of, pos_of = self._lane_of, self._pos_of
+        lanes = [lane_of[i] for i in ids]
+        pos = np.array([pos_of[i] for i in ids], dtype=float).reshape(len(ids))
+        v_next = np.asarray(v_next, dtype=float)
         # road-frame d -> lateral lane position where the vehicle will be after the step
-        lats = self.net.lateral_lane_position(lanes, pos + np.asarray(v_next) * self.dt, d_next)
-        for vid, v, lat, vl in zip(ids, v_next, lats.tolist(), v_lat_next, strict=True):
-            veh.setSpeed(vid, float(v))
-            veh.setLateralLanePosition(vid, lat)
-            self.v_lat_state[vid] = float(vl)
+        lats = self.net.lateral_lane_position(lanes, pos + v_next * self.dt, d_next)
+        set_speed, set_lat = self._setters(veh)
+        for vid, v, lat in zip(ids, v_next.tolist(), lats.tolist(), strict=True):
+            set_speed(vid, v)
+            set_lat(vid, lat)
+        self.v_lat_state.update(zip(ids, np.asarray(v_lat_next, dtype=float).tolist(),
+                                    strict=True))
+
+    def _setters(self, veh):
+        """``(setSpeed, setLateralLanePosition)``: libsumo's C functions when running
+        libsumo, else the TraCI client's methods (sumo-gui)."""
+        raw = getattr(self.ts, "_libsumo", None)
+        fast = (getattr(raw, "vehicle_setSpeed", None),
+                getattr(raw, "vehicle_setLateralLanePosition", None))
+        if None in fast:
+            return veh.setSpeed, veh.setLateralLanePosition
+        return fast
 
     def collisions(self) -> list[tuple[str, str]]:
         """(collider, victim) pairs SUMO detected in the last step."""

@@ -1,0 +1,582 @@
+"""Compiled kernels of the lane-free law (numba, ``cache=True``): one loop per CAV over its
+window of neighbours in road order, instead of (N, K) and (R, C, K) numpy temporaries.
+
+Every kernel computes what the vectorised numpy code of the law computed before (commit of
+issue 15; ``tests/test_exactness.py``), in the same floating-point order: the same
+expressions evaluated left to right, scalars folded the same way (``P`` holds them, made by
+:func:`pack`), ``min``/``max``/``argmin``/``argmax`` with numpy's first-index ties, and the
+sums over a window in numpy's pairwise order (:func:`pairwise_sum`). Entries of a window
+with no neighbour (``ds = inf``) never contribute, as before.
+
+Shapes: N CAVs (rows 0..N-1 of the scene), M vehicles in all (CAVs first), K = 2 x the
+law's ``window`` neighbours per CAV; positions m, speeds m/s, accelerations m/s^2.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+# ------------------------------------------------------------------ scalar parameters
+#: Names of the scalars in ``P`` (see :func:`pack`), in order.
+NAMES = (
+    "time_gap_s", "time_gap_hdv_s", "standstill_gap_m", "kp", "kd", "ff_gain", "kp_hdv",
+    "kd_hdv", "speed_gain", "approach_gain", "spacing_error_min_m", "spacing_error_max_m",
+    "anticipation_s", "follow_margin_m", "lat_gain", "lat_damping", "lateral_clearance_m",
+    "edge_margin_m", "side_buffer_m", "side_buffer_speed_s", "side_buffer_s",
+    "cut_in_speed_margin_mps", "cut_in_gap_m", "repulsion_gain", "lookahead_s",
+    "lookahead_min_m", "scan_margin_m", "scan_time_gap_s", "move_cost", "clear_gain",
+    "clear_cap_m", "nudge_gain", "order_gain", "urgent_gain_mps", "queue_speed_mps",
+    "bias_speed_low_mps", "coop_time_gap_s", "yield_decel_mps2", "comfort_decel_mps2",
+    # derived (folded as the numpy code folded them)
+    "bias_span", "app_bt2", "app_mbt", "app_2b", "scan_2b", "lat_2a", "two_lc",
+    "zipper_gap", "long_min", "long_max", "lat_speed_max", "em_bt2", "em_mbt", "em_2b",
+    "shift_cav", "dt",
+)
+(TG, TGH, S0, KP, KD, KFF, KPH, KDH, KV, KA, EMIN, EMAX, ANT, FM, KY, CY, LC, EM, SB, SBV,
+ SBT, CIM, CIG, RG, LAS, LAM, SCM, SCT, MC, CG, CC, NG, OG, UG, QS, BL, CT, YD, CB, BSPAN,
+ ABT2, AMBT, A2B, SC2B, L2A, TWOLC, ZG, LMIN, LMAX, VMAX, EBT2, EMBT, E2B, SHC, DT) = range(
+    len(NAMES))
+
+
+def pack(p, long_min: float, long_max: float, lat_speed_max: float, emergency_decel: float,
+         dt: float) -> np.ndarray:
+    """The scalars of the kernels (float64 array, order of :data:`NAMES`) for parameters
+    ``p`` (:class:`~controllers.road.lanefree.LaneFreeParams`), the actuator limits and the
+    step ``dt`` (s). Derived values are computed exactly as the numpy law wrote them."""
+    vals = [float(getattr(p, name)) for name in NAMES[:NAMES.index("bias_span")]]
+    b, tau = p.comfort_decel_mps2, 0.5
+    e, t = emergency_decel, dt
+    vals += [
+        max(p.bias_speed_high_mps - p.bias_speed_low_mps, 1e-9),
+        (b * tau) ** 2, -b * tau, 2 * b,
+        2 * p.scan_decel_mps2,
+        2 * p.a_lat_bound_mps2,
+        2.0 * p.lateral_clearance_m,
+        p.side_buffer_m + p.zipper_slack_m,
+        long_min, long_max, lat_speed_max,
+        (e * t) ** 2, -e * t, 2 * e,
+        lat_speed_max * dt,
+        dt,
+    ]
+    return np.array(vals, dtype=float)
+
+
+# ------------------------------------------------------------------ helpers
+@njit(cache=True, inline="always")
+def pairwise_sum(a, n):
+    """``np.sum`` of ``a[:n]`` in numpy's order (pairwise, 8 accumulators; n <= 128)."""
+    if n < 8:
+        res = -0.0
+        for i in range(n):
+            res += a[i]
+        return res
+    r0, r1, r2, r3 = a[0], a[1], a[2], a[3]
+    r4, r5, r6, r7 = a[4], a[5], a[6], a[7]
+    i = 8
+    stop = n - (n % 8)
+    while i < stop:
+        r0 += a[i]
+        r1 += a[i + 1]
+        r2 += a[i + 2]
+        r3 += a[i + 3]
+        r4 += a[i + 4]
+        r5 += a[i + 5]
+        r6 += a[i + 6]
+        r7 += a[i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[i]
+        i += 1
+    return res
+
+
+@njit(cache=True, inline="always")
+def _follow(P, g, v_j, a_j, j_cav, v, t_cav, t_hdv):
+    """CACC (CAV leader) or ACC command, m/s^2; inf beyond the linear law's range."""
+    if j_cav:
+        T, kp, kd, kff = t_cav, P[KP], P[KD], P[KFF]
+    else:
+        T, kp, kd, kff = t_hdv, P[KPH], P[KDH], 0.0
+    raw = g - P[S0] - T * v
+    err = max(raw, P[EMIN])
+    u = kp * err + kd * (v_j - v) + kff * min(max(a_j, P[LMIN]), P[LMAX])
+    return u if raw <= P[EMAX] else np.inf
+
+
+@njit(cache=True, inline="always")
+def _approach(P, g, v_j, v):
+    """Approach bound ``k_a (v_safe - v)``, m/s^2."""
+    g0 = g - P[S0]
+    vj = max(v_j, 0.0)
+    root = math.sqrt(max(P[ABT2] + vj * vj + P[A2B] * g0, 0.0))
+    v_safe = P[AMBT] + root if g0 > 0 else 0.0
+    v_safe = max(v_safe, min(vj, max(g0, 0.0)))
+    return P[KA] * (v_safe - v)
+
+
+# ------------------------------------------------------------------ neighbours
+@njit(cache=True)
+def window(s, d, n, order, rank, k_side, periodic, period):
+    """Neighbours of each CAV in road order: ``j`` (N, K) rows, ``ds`` (N, K) m (wrapped on
+    a ring; inf where there is none), ``dd`` (N, K) m; K = 2 ``k_side``."""
+    m = s.shape[0]
+    k2 = 2 * k_side
+    j = np.empty((n, k2), np.int64)
+    ds = np.empty((n, k2))
+    dd = np.empty((n, k2))
+    for i in range(n):
+        r = rank[i]
+        for q in range(k2):
+            off = q - k_side if q < k_side else q - k_side + 1
+            pos = r + off
+            if not periodic:
+                valid = 0 <= pos < m
+                jj = order[min(max(pos, 0), m - 1)]
+            else:
+                valid = True
+                if 2 * k_side >= m:
+                    valid = (off > 0) or (off >= -(m - 1 - k_side))
+                    valid = valid and abs(off) <= m - 1
+                jj = order[pos % m]
+            valid = valid and jj != i
+            x = s[jj] - s[i]
+            if periodic:
+                x = (x + 0.5 * period) % period - 0.5 * period
+            j[i, q] = jj
+            ds[i, q] = x if valid else np.inf
+            dd[i, q] = d[jj] - d[i]
+    return j, ds, dd
+
+
+@njit(cache=True)
+def leader_gaps(s, d, length, width, rows, reach_m, periodic, period, lateral_margin_m, v,
+                order, rank):
+    """:func:`controllers.road_reference.leader_gaps` with ``v``: (gap (R,) m, v_leader (R,)
+    m/s; inf / nan where none), visiting the vehicles ahead in the same blocks."""
+    n, m = rows.shape[0], s.shape[0]
+    gap = np.full(n, np.inf)
+    v_leader = np.full(n, np.nan)
+    if n == 0 or m < 2:
+        return gap, v_leader
+    max_ds = reach_m if not periodic else min(reach_m, 0.5 * period)
+    half_l_max = 0.5 * np.max(length)
+    for a in range(n):
+        me = rows[a]
+        r = rank[me]
+        hl_me = 0.5 * length[me]
+        k0, block = 1, 8
+        while k0 < m:
+            stop = min(k0 + block, m)
+            last = np.inf
+            for off in range(k0, stop):
+                idx = r + off
+                if not periodic and idx >= m:
+                    x = np.inf
+                    jj = order[0]
+                else:
+                    jj = order[idx % m]
+                    x = s[jj] - s[me]
+                    if periodic:
+                        x = np.mod(x, period)
+                last = x
+                overlap = abs(d[jj] - d[me]) < 0.5 * (width[me] + width[jj]) + lateral_margin_m
+                if x > 0 and x <= max_ds and overlap:
+                    g = x - hl_me - 0.5 * length[jj]
+                    if g < gap[a]:
+                        gap[a] = g
+                        v_leader[a] = v[jj]
+            lower = last - hl_me - half_l_max
+            if not (last <= max_ds and lower < gap[a]):
+                break
+            k0 += block
+            block *= 2
+    return gap, v_leader
+
+
+# ------------------------------------------------------------------ lateral target
+@njit(cache=True)
+def plan(P, rows, frac, lo, hi, current, j, ds, s, d, v, length, width, is_cav, v_des,
+         v_des_all, static_idx, periodic, period):
+    """Best candidate (R,) m, its score gain over the current target (R,) m/s and whether
+    the move is announced (R,) for the CAVs ``rows`` (see the law's ``_plan``)."""
+    n_r = rows.shape[0]
+    n_c = frac.shape[0]
+    k2 = j.shape[1]
+    best = np.empty(n_r)
+    gain = np.empty(n_r)
+    need = np.zeros(n_r, np.bool_)
+    v_pass = np.empty(k2)
+    reach = np.empty(k2)
+    along = np.zeros(k2, np.bool_)
+    half_w = np.empty(k2)
+    eager = np.empty(k2)
+    nudging = np.zeros(k2, np.bool_)
+    keep = np.empty(k2, np.int64)  # the window entries that can change a score
+    buf = np.zeros(k2)
+    cand = np.empty(n_c)
+    score = np.empty(n_c)
+    offer = np.empty(n_c)
+    blocked = np.zeros(n_c, np.bool_)
+    for r in range(n_r):
+        i = rows[r]
+        w_i, l_i, v_i, d_i, vd = width[i], length[i], v[i], d[i], v_des[r]
+        lo_r, hi_r = lo[r], hi[r]
+        free = v_i > vd - 1.0
+        n_keep = 0
+        any_nudge = False
+        for k in range(k2):
+            x = ds[i, k]
+            if not np.isfinite(x):
+                continue
+            jj = j[i, k]
+            gap = x - 0.5 * (l_i + length[jj])
+            v_j = v[jj]
+            g0 = max(gap - P[S0], 0.0)
+            vp = np.inf
+            if x > 0:
+                vp = min(v_j + g0 / P[SCT], math.sqrt(v_j * v_j + P[SC2B] * g0))
+            al = abs(x) < 0.5 * (l_i + length[jj]) + P[SB]
+            e = max(v_des_all[jj] - vd - 1.0, 0.0) if free else 0.0
+            close = x < 0 and is_cav[jj] and (-gap < 2.0 * max(v_j, 5.0))
+            nud = close and e > 0
+            # offer = min(min over the band of v_pass, v_des): a v_pass >= v_des cannot
+            # lower it; only entries that can change an offer, a clearance or a nudge count
+            if not (vp < vd or al or nud):
+                continue
+            v_pass[k] = vp if vp < vd else np.inf
+            reach[k] = 0.5 * (w_i + width[jj]) + P[SCM]
+            along[k] = al
+            half_w[k] = 0.5 * (w_i + width[jj])
+            eager[k] = e
+            nudging[k] = nud
+            any_nudge = any_nudge or nud
+            keep[n_keep] = k
+            n_keep += 1
+        span = max(hi_r - lo_r, 0.0)
+        for c in range(n_c):
+            cand[c] = lo_r + span * frac[c]
+            blocked[c] = False
+        # a band that ends at a stopped obstacle within the look-ahead offers nothing
+        look = max(P[LAM], v_i * P[LAS])
+        for q in range(static_idx.shape[0]):
+            kk = static_idx[q]
+            ds_k = s[kk] - s[i]
+            if periodic:
+                ds_k = np.mod(ds_k, period)
+            g_k = ds_k - 0.5 * (l_i + length[kk])
+            if ds_k > 0 and g_k < look:
+                reach_k = 0.5 * (w_i + width[kk]) + P[SCM]
+                for c in range(n_c):
+                    if abs(d[kk] - cand[c]) < reach_k:
+                        blocked[c] = True
+        rank_v = min(max((vd - P[BL]) / P[BSPAN], 0.0), 1.0)
+        y_pref = lo_r + (hi_r - lo_r) * rank_v
+        free_w = min(max((v_i / max(vd, 1.0) - 0.75) / 0.2, 0.0), 1.0)
+        for c in range(n_c):
+            y = cand[c]
+            off = np.inf
+            clear = np.inf
+            for q in range(n_keep):
+                k = keep[q]
+                lat = abs(d[j[i, k]] - y)
+                in_band = lat < reach[k]
+                if in_band and v_pass[k] < off:
+                    off = v_pass[k]
+                if along[k]:
+                    sg = lat - half_w[k]
+                    if sg < clear:
+                        clear = sg
+                if any_nudge:
+                    buf[k] = eager[k] if (in_band and nudging[k]) else 0.0
+            off = min(off, vd)
+            if blocked[c]:
+                off = 0.0
+            offer[c] = off
+            clear = min(max(clear, -1.0), P[CC])
+            nudge = 0.0
+            if any_nudge:  # numpy's sum over the whole window (zeros elsewhere)
+                nudge = pairwise_sum(buf, k2)
+            score[c] = (off - P[MC] * abs(y - d_i)
+                        + free_w * (P[CG] * clear - P[OG] * abs(y - y_pref))
+                        - P[NG] * nudge)
+        if any_nudge:
+            for q in range(n_keep):
+                buf[keep[q]] = 0.0
+        k_best = 0
+        for c in range(1, n_c):
+            if score[c] > score[k_best]:
+                k_best = c
+        cur = d_i if np.isnan(current[r]) else current[r]
+        k_cur = 0
+        k_here = 0
+        for c in range(1, n_c):
+            if abs(cand[c] - cur) < abs(cand[k_cur] - cur):
+                k_cur = c
+            if abs(cand[c] - d_i) < abs(cand[k_here] - d_i):
+                k_here = c
+        best[r] = cand[k_best]
+        gn = score[k_best] - score[k_cur]
+        gain[r] = gn
+        outside = (d_i < lo_r - 0.05) or (d_i > hi_r + 0.05)
+        nd = (blocked[k_here] or outside) and gn > 0 and not blocked[k_best]
+        nd = nd or ((offer[k_best] - offer[k_here] > max(P[UG], 0.3 * v_i))
+                    and v_i > P[QS] and gn > 0)
+        need[r] = nd
+    return best, gain, need
+
+
+# ------------------------------------------------------------------ interactions
+@njit(cache=True)
+def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targets,
+             urgent, held, lead_gap, lead_v, v_des, edges, has_edges):
+    """Everything of one step that needs the window, per CAV:
+
+    * side bounds ``hi``, ``lo`` (N,) m (the law's ``_side``);
+    * longitudinal command (N,) m/s^2 from the desired speed, the primary leader
+      (``lead_gap``, ``lead_v``), the window leaders and the zipper (not the narrowing and
+      not the yield, which the caller adds: ``min`` is order-free);
+    * the yield requests ``ask`` (N, K) and their commands ``u_yield`` (N, K), already
+      bounded below by ``-yield_decel_mps2`` (before the patience rule), and how many
+      pairs asked before the zipper rule took some back (``n_asked``: the law applies its
+      patience rule whenever one did);
+    * lateral command (N,) m/s^2 (the law's ``_lateral``; ``edges`` (N, 2) m, the road
+      edges of the target's look-ahead, used when ``has_edges``).
+    """
+    k2 = j.shape[1]
+    u_long = np.empty(n)
+    u_lat = np.empty(n)
+    hi_n = np.empty(n)
+    lo_n = np.empty(n)
+    ask = np.zeros((n, k2), np.bool_)
+    u_yield = np.full((n, k2), np.inf)
+    push = np.zeros(k2)
+    n_asked = 0
+    dt = P[DT]
+    for i in range(n):
+        v_i, d_i, vl_i, l_i, w_i = v[i], d[i], v_lat[i], length[i], width[i]
+        # one pass over the window: side bounds and repulsion (the law's _side), leaders,
+        # yield requests and the zipper (its _longitudinal)
+        hi = np.inf
+        lo = -np.inf
+        u = P[KV] * (v_des[i] - v_i)
+        if np.isfinite(lead_gap[i]):
+            u = min(u, _approach(P, lead_gap[i], lead_v[i], v_i))
+        u_win = np.inf
+        u_zip = np.inf
+        mover_i = urgent[i]
+        for k in range(k2):
+            x = ds[i, k]
+            ddk = dd[i, k]
+            if not np.isfinite(x):
+                # np.sign(dd) * 0.0: the sign of a zero term, as the numpy sum saw it
+                push[k] = np.sign(ddk) * 0.0
+                continue
+            jj = j[i, k]
+            v_j = v[jj]
+            j_cav = is_cav[jj]
+            half_l = 0.5 * (l_i + length[jj])
+            half_w = 0.5 * (w_i + width[jj])
+            ahead = x > 0
+            # -- side
+            if ahead:
+                closing_long, v_rear, v_follow, v_lead = v_i - v_j, v_i, v_i, v_j
+            else:
+                closing_long, v_rear, v_follow, v_lead = v_j - v_i, v_j, v_j, v_i
+            buf = P[SB] + P[SBV] * v_rear + P[SBT] * max(closing_long, 0.0)
+            al = abs(x) < half_l + buf
+            g_pair = abs(x) - half_l - P[CIG]
+            root = math.sqrt(max(P[EBT2] + v_lead * v_lead + P[E2B] * g_pair, 0.0))
+            v_ok = 0.0 if g_pair < 0 else P[EMBT] + root
+            al = al or ((v_follow > v_ok - P[CIM]) and (v_follow > 0.01))
+            shift = P[SHC] if j_cav else abs(v_lat[jj]) * dt
+            need = half_w + P[LC] + shift
+            if al:
+                if ddk >= 0:
+                    hi = min(hi, d[jj] - need)
+                else:
+                    lo = max(lo, d[jj] + need)
+            side_gap = abs(ddk) - half_w
+            pk = 0.0
+            if al and side_gap < P[TWOLC]:
+                pk = P[RG] * (P[TWOLC] - side_gap) / P[TWOLC]
+            push[k] = np.sign(ddk) * pk
+            # -- leaders: overlapping now or within the anticipation horizon
+            g = x - half_l
+            lat_gap = abs(ddk) - half_w
+            rel_vlat = v_lat[jj] - vl_i
+            closing = -rel_vlat if ddk > 0 else rel_vlat
+            lat_future = lat_gap - max(closing, 0.0) * P[ANT]
+            is_leader = ahead and (min(lat_gap, lat_future) < P[FM])
+            if is_leader:
+                u_f = _follow(P, g, v_j, accel[jj], j_cav, v_i, P[TG], P[TGH])
+                u_f = min(u_f, _approach(P, g, v_j, v_i))
+                u_win = min(u_win, u_f)
+            # -- cooperation: a mover announced into this CAV's band from ahead, or a
+            # held-up human driver next to it, asks for a gap
+            if ahead:
+                tgt = targets[jj] if jj < n else d[jj]
+                moving = urgent[jj] if jj < n else False
+                into = abs(tgt - d_i) < half_w + P[FM]
+                not_yet = abs(ddk) >= half_w
+                a_k = j_cav and moving and into and not_yet
+                a_k = a_k or ((not j_cav) and held[jj] and abs(ddk) < half_w + 2.5 and not_yet)
+                if a_k:
+                    n_asked += 1
+                    u_c = _follow(P, g, v_j, accel[jj], j_cav, v_i, P[CT], P[CT])
+                    if not (j_cav and ((u_c < -P[YD]) or (g < P[ZG]))):
+                        ask[i, k] = True
+                        u_yield[i, k] = max(u_c, -P[YD])
+            # -- zipper: an announced mover slots in behind the vehicles of its target band
+            if mover_i and not is_leader:
+                in_target = abs(d[jj] - targets[i]) < half_w + P[FM]
+                if in_target:
+                    g_back = -x - half_l
+                    passes = False
+                    if x <= 0:
+                        u_let = _follow(P, g_back, v_i, accel[i], True, v_j, P[CT], P[CT])
+                        if not np.isfinite(u_let):
+                            u_let = 0.0
+                        passes = (u_let < -P[YD]) or (g_back < P[ZG])
+                    if ahead or passes:
+                        u_z = _follow(P, g, v_j, accel[jj], j_cav, v_i, P[CT], P[CT])
+                        u_z = max(u_z, -P[CB])
+                        u_zip = min(u_zip, u_z)
+        hi_n[i] = hi
+        lo_n[i] = lo
+        u = min(u, u_win)
+        u = min(u, u_zip)
+        u_long[i] = u
+        # ---- lateral
+        ul = P[KY] * (targets[i] - d_i) - P[CY] * vl_i
+        ul -= pairwise_sum(push, k2)
+        vmax = P[VMAX]
+        a2 = P[L2A]
+        v_hi_n = min(math.sqrt(a2 * max(hi - d_i, 0.0)) if hi > d_i else 0.0, vmax)
+        v_lo_n = max(-math.sqrt(a2 * max(d_i - lo, 0.0)) if lo < d_i else 0.0, -vmax)
+        v_hi_e = vmax
+        v_lo_e = -vmax
+        if has_edges:
+            hi_e = edges[i, 1] - 0.5 * w_i - P[EM]
+            lo_e = edges[i, 0] + 0.5 * w_i + P[EM]
+            v_hi_e = min(max(np.sign(hi_e - d_i) * math.sqrt(a2 * abs(hi_e - d_i)), -vmax),
+                         vmax)
+            v_lo_e = min(max(-np.sign(d_i - lo_e) * math.sqrt(a2 * abs(d_i - lo_e)), -vmax),
+                         vmax)
+            v_lo_e = min(v_lo_e, v_hi_e)
+        want = vl_i + ul * dt
+        v_next = min(max(min(max(want, v_lo_e), v_hi_e), v_lo_n), v_hi_n)
+        if v_lo_n > v_hi_n:
+            v_next = 0.0
+        u_lat[i] = (v_next - vl_i) / dt
+    return u_long, hi_n, lo_n, u_lat, ask, u_yield, n_asked
+
+
+# ------------------------------------------------------------------ one step
+@njit(cache=True)
+def linspace01(num):
+    """``np.linspace(0.0, 1.0, num)``, the same numbers: ``i * (1 / (num - 1))``, last 1."""
+    out = np.empty(num)
+    step = 1.0 / (num - 1)
+    for i in range(num):
+        out[i] = i * step
+    out[num - 1] = 1.0
+    return out
+
+
+@njit(cache=True)
+def law_step(P, s, d, v, v_lat, length, width, accel, is_cav, n, order, k_side, periodic,
+             period, target0, urgent0, due0, fixed, edges_ahead, loop_edges, has_loop_edges,
+             v_des, static_idx, held, candidate_step_m, hysteresis_mps, queue_hysteresis,
+             lat_max, reach_lead):
+    """The law's step after its inputs (see the law's ``compute``): the road edges of the
+    target's look-ahead (``edges_ahead``, never wider than ``loop_edges``), the neighbour
+    window, the lateral targets of the CAVs whose turn it is (``due0``), the primary
+    leaders, the window terms and the command clipped to the actuator box.
+
+    Returns (u (N, 2), u_long unclipped (N,), hi_n, lo_n (N,) side bounds, j (N, K),
+    ask, u_yield (N, K), n_asked, target (N,), urgent (N,), target changes, the edges used
+    (N, 2)).
+    """
+    # lowest and highest lateral centre inside the road ahead
+    edges = np.empty((n, 2))
+    lo = np.empty(n)
+    hi = np.empty(n)
+    for i in range(n):
+        e0, e1 = edges_ahead[i, 0], edges_ahead[i, 1]
+        if has_loop_edges:
+            e0 = max(e0, loop_edges[i, 0])
+            e1 = min(e1, loop_edges[i, 1])
+        edges[i, 0] = e0
+        edges[i, 1] = e1
+        lo[i] = e0 + 0.5 * width[i] + P[EM]
+        hi[i] = e1 - 0.5 * width[i] - P[EM]
+    m = s.shape[0]
+    rank = np.empty(m, np.int64)
+    for q in range(m):
+        rank[order[q]] = q
+    j, ds, dd = window(s, d, n, order, rank, k_side, periodic, period)
+    target = target0.copy()
+    urgent = urgent0.copy()
+    due = due0.copy()
+    if fixed:  # rows (or lanes) fixed where each CAV entered
+        for i in range(n):
+            if np.isnan(target[i]):
+                target[i] = d[i]
+            due[i] = False
+    n_due = 0
+    for i in range(n):
+        if due[i]:
+            n_due += 1
+    n_changes = 0
+    if n_due:
+        rows = np.empty(n_due, np.int64)
+        q = 0
+        for i in range(n):
+            if due[i]:
+                rows[q] = i
+                q += 1
+        lo_r = lo[rows]
+        hi_r = hi[rows]
+        widest = -np.inf
+        for r in range(n_due):
+            widest = max(widest, hi_r[r] - lo_r[r])
+        n_c = max(2, int(np.ceil(widest / candidate_step_m)) + 1)
+        frac = linspace01(n_c)
+        v_des_all = np.empty(m)
+        v_des_all[:n] = v_des
+        v_des_all[n:] = v[n:]
+        best, gain, need = plan(P, rows, frac, lo_r, hi_r, target[rows], j, ds, s, d, v,
+                                length, width, is_cav, v_des[rows], v_des_all, static_idx,
+                                periodic, period)
+        for r in range(n_due):
+            i = rows[r]
+            # in a slow queue lateral moves do not pay: the bar rises as the speed falls
+            bar = hysteresis_mps + queue_hysteresis * max(P[QS] - v[i], 0.0)
+            was_nan = np.isnan(target[i])
+            changed = was_nan or gain[r] > bar or need[r]
+            if changed:
+                if not was_nan:
+                    n_changes += 1
+                target[i] = best[r]
+                urgent[i] = need[r]
+    for i in range(n):
+        # a target outside the road ahead (narrowing) is pulled inside at once
+        target[i] = min(max(target[i], lo[i]), max(lo[i], hi[i]))
+        arrived = (abs(target[i] - d[i]) < 0.5 * width[i]) and (d[i] >= lo[i] - 0.05) and (
+            d[i] <= hi[i] + 0.05)  # and inside the road ahead
+        if arrived:
+            urgent[i] = False
+    lead_gap, lead_v = leader_gaps(s, d, length, width, np.arange(n), reach_lead, periodic,
+                                   period, P[FM], v, order, rank)
+    u_long, hi_n, lo_n, u_lat, ask, u_yield, n_asked = interact(
+        P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, target, urgent, held,
+        lead_gap, lead_v, v_des, edges, True)
+    u = np.empty((n, 2))
+    for i in range(n):
+        u[i, 0] = min(max(u_long[i], P[LMIN]), P[LMAX])
+        u[i, 1] = min(max(u_lat[i], -lat_max), lat_max)
+    return u, u_long, hi_n, lo_n, j, ask, u_yield, n_asked, target, urgent, n_changes, edges

@@ -1,0 +1,391 @@
+"""The lane-free flocking law (:class:`LaneFreeFlocking`; see :mod:`controllers.road.lanefree`).
+
+Per step: the scene (all vehicles, CAVs first), one sort along the road shared by the
+neighbour window and the leader search, the lateral targets of the CAVs whose turn it is
+(:func:`kernels.plan`), then every window term at once (:func:`kernels.interact`); the
+narrowing bound and the patience rule of the yields, which are rare, stay numpy and Python.
+Memory across steps is kept in arrays indexed by a slot per CAV id (one dict look-up per CAV
+per step); an entry counts only if its CAV was present in the previous step, as when it was
+kept in dicts pruned every step.
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from controllers.observation import Observation
+
+from . import kernels as K
+from .params import LaneFreeParams
+
+
+def _stable_hash(vid) -> int:
+    """A hash of a vehicle id that is the same in every process (Python's is salted)."""
+    return zlib.crc32(str(vid).encode())
+
+
+@dataclass
+class _Scene:
+    """All vehicles of a step in one array set: CAVs first (rows 0..N-1), then the others."""
+
+    s: np.ndarray
+    d: np.ndarray
+    v: np.ndarray
+    v_lat: np.ndarray
+    length: np.ndarray
+    width: np.ndarray
+    accel: np.ndarray
+    is_cav: np.ndarray
+    static: np.ndarray  # a non-CAV never seen moving (a stopped obstacle)
+    n: int
+
+
+class LaneFreeFlocking:
+    """The lane-free flocking law (see the package docstring).
+
+    Args:
+        params: the law's parameters.
+        ctx: the run's context (step, actuator limits; :class:`controllers.registry.RoadContext`).
+    """
+
+    name = "flocking"
+
+    def __init__(self, params: LaneFreeParams, ctx=None) -> None:
+        self.params = params
+        limits = getattr(ctx, "limits", None)
+        self.long_min = getattr(limits, "long_min_mps2", -4.5)
+        self.long_max = getattr(limits, "long_max_mps2", 2.6)
+        self.lat_max = getattr(limits, "lat_max_mps2", 1.5)
+        self.lat_speed_max = getattr(limits, "lat_speed_max_mps", 1.5)
+        self.emergency_decel = getattr(limits, "emergency_decel_mps2", 9.0)
+        self._packed: dict[float, np.ndarray] = {}
+        self.reset()
+
+    # ------------------------------------------------------------------ protocol
+    def reset(self) -> None:
+        # memory of the CAVs, by slot (self._slot: CAV id -> slot)
+        self._slot: dict = {}
+        self._ids_of_slot: list = []
+        self._mem_target = np.empty(0)  # lateral target d*, m
+        self._mem_urgent = np.empty(0, bool)  # its move pays in speed (announced)
+        self._mem_phase = np.empty(0, np.int64)  # replanning slot
+        self._mem_u = np.empty(0)  # last longitudinal command, m/s^2
+        self._mem_last = np.empty(0, np.int64)  # call (below) in which it was last present
+        self._calls = 0  # steps with CAVs so far
+        self._v_prev: dict = {}  # other id -> last speed, m/s
+        self._moved: set = set()  # others seen moving (a stopped obstacle never is)
+        self._yield_since: dict = {}  # (CAV id, vehicle id) -> time the yield began, s
+        self._urgent_now = np.zeros(0, bool)
+        self._edges_plan = None
+        self._k = 0
+        self.stats = {"steps": 0, "cav_steps": 0, "target_changes": 0, "yields": 0}
+
+    def _kept(self, values: np.ndarray) -> dict:
+        """``{id: value}`` of the CAVs present in the last step."""
+        last = self._calls - 1
+        return {i: values[k].item() for i, k in self._slot.items() if self._mem_last[k] == last}
+
+    @property
+    def _target(self) -> dict:
+        """CAV id -> lateral target d*, m (the CAVs of the last step)."""
+        return self._kept(self._mem_target)
+
+    @property
+    def _urgent(self) -> dict:
+        """CAV id -> whether its move is announced (the CAVs of the last step)."""
+        return self._kept(self._mem_urgent)
+
+    @property
+    def _u_prev(self) -> dict:
+        """CAV id -> last longitudinal command, m/s^2 (the CAVs of the last step)."""
+        return self._kept(self._mem_u)
+
+    @property
+    def lattice_m(self) -> tuple[float, float]:
+        """Nominal spacing along the road at 25 m/s and twice it as range, m (flock metrics)."""
+        p = self.params
+        d = p.standstill_gap_m + 4.5 + p.time_gap_s * 25.0
+        return d, 2.0 * d
+
+    def extra_metrics(self) -> dict[str, float]:
+        """Lateral target changes per CAV-step and yields per CAV-step (cooperation)."""
+        n = max(self.stats["cav_steps"], 1)
+        return {"target_change_rate": self.stats["target_changes"] / n,
+                "yield_rate": self.stats["yields"] / n}
+
+    # ------------------------------------------------------------------ the law
+    def compute(self, obs: Observation) -> np.ndarray:
+        """Accelerations (N, 2), m/s^2."""
+        obs.check_finite()
+        n = obs.n
+        self._k += 1
+        self.stats["steps"] += 1
+        self.stats["cav_steps"] += n
+        if n == 0:
+            return np.zeros((0, 2))
+        p = self.params
+        ids = obs.ids.tolist()
+        slots, fresh = self._slots(ids)
+        sc = self._scene(obs, slots, fresh)
+        m = len(sc.s)
+        periodic = obs.period_s is not None
+        period = float(obs.period_s) if periodic else 0.0
+        order = np.argsort(sc.s, kind="stable")
+        k_side = min(p.window, max((m - 1) // 2, 1)) if periodic else p.window
+        v_des = np.ascontiguousarray(obs.desired_speed, dtype=float) \
+            if obs.desired_speed is not None else np.full(n, 30.0)
+        # memory: lateral targets (re-chosen every replan_s, staggered by id) and moves
+        every = max(1, int(round(p.replan_s / obs.dt)))
+        target = np.where(fresh, np.nan, self._mem_target[slots])
+        urgent = ~fresh & self._mem_urgent[slots]
+        if fresh.any():
+            self._mem_phase[slots[fresh]] = [_stable_hash(ids[r]) % every
+                                             for r in np.flatnonzero(fresh)]
+        due = np.isnan(target) | (self._mem_phase[slots] == self._k % every)
+        edges, loop_edges = self._band_edges(obs, sc)
+        held = self._held(obs, sc, order, periodic, period)
+        # primary leader in the current band, searched as far as braking needs
+        reach = float(np.max(sc.v[:n])) ** 2 / (2 * p.comfort_decel_mps2) + 30.0
+        (u, u_long, hi_n, lo_n, j, ask, u_yield, n_asked, target, urgent, n_changes,
+         self._edges_plan) = K.law_step(
+            self._pack(obs.dt), sc.s, sc.d, sc.v, sc.v_lat, sc.length, sc.width, sc.accel,
+            sc.is_cav, n, order, k_side, periodic, period, target, urgent, due,
+            p.lateral_mode == "fixed", edges, loop_edges, loop_edges is not None, v_des,
+            np.flatnonzero(sc.static), held, float(p.candidate_step_m), float(p.hysteresis_mps),
+            float(p.queue_hysteresis), float(self.lat_max), reach)
+        self.stats["target_changes"] += int(n_changes)
+        self._urgent_now = urgent
+        # a narrowing ahead that this CAV's body does not fit into where it is: its start
+        # is a stopped wall for the approach bound (the CAV merges or waits before it)
+        narrowing = obs.road is not None and not obs.road.is_constant
+        if narrowing or n_asked:
+            if narrowing:
+                u_long = np.minimum(u_long, self._narrowing(obs, sc, {"hi": hi_n, "lo": lo_n}))
+            if n_asked:  # cooperation: yield to announced movers and held-up human drivers
+                u_long = np.minimum(u_long, self._yield(obs, sc, j, ask, u_yield))
+            u[:, 0] = np.clip(u_long, self.long_min, self.long_max)
+        self._remember(obs, sc, slots, target, urgent, u)
+        return u
+
+    # ------------------------------------------------------------------ inputs
+    def _pack(self, dt: float) -> np.ndarray:
+        P = self._packed.get(dt)
+        if P is None:
+            P = K.pack(self.params, self.long_min, self.long_max, self.lat_speed_max,
+                       self.emergency_decel, dt)
+            self._packed[dt] = P
+        return P
+
+    def _slots(self, ids: list) -> tuple[np.ndarray, np.ndarray]:
+        """Memory slots (N,) of the CAVs and which of them start afresh (N,) (absent in the
+        previous step: no memory, as when it was pruned)."""
+        get = self._slot.get
+        found = [get(i) for i in ids]
+        if None in found:
+            for r, k in enumerate(found):
+                if k is None:
+                    k = len(self._ids_of_slot)
+                    self._slot[ids[r]] = k
+                    self._ids_of_slot.append(ids[r])
+                    found[r] = k
+            size = len(self._ids_of_slot)
+            if size > len(self._mem_last):
+                grow = max(size, 2 * len(self._mem_last), 64) - len(self._mem_last)
+                self._mem_target = np.concatenate([self._mem_target, np.full(grow, np.nan)])
+                self._mem_urgent = np.concatenate([self._mem_urgent, np.zeros(grow, bool)])
+                self._mem_phase = np.concatenate([self._mem_phase, np.zeros(grow, np.int64)])
+                self._mem_u = np.concatenate([self._mem_u, np.zeros(grow)])
+                self._mem_last = np.concatenate([self._mem_last, np.full(grow, -2, np.int64)])
+        slots = np.array(found, dtype=np.intp)
+        fresh = self._mem_last[slots] != self._calls - 1
+        return slots, fresh
+
+    def _scene(self, obs: Observation, slots: np.ndarray, fresh: np.ndarray) -> _Scene:
+        n = obs.n
+        has_others = obs.others_q is not None and len(obs.others_q) > 0
+        length = obs.length if obs.length is not None else np.full(n, 4.5)
+        width = obs.width if obs.width is not None else np.full(n, 1.8)
+        u_prev = np.where(fresh, 0.0, self._mem_u[slots])
+        if not has_others:
+            static = np.zeros(n, bool)
+            return _Scene(
+                s=np.ascontiguousarray(obs.q[:, 0]), d=np.ascontiguousarray(obs.q[:, 1]),
+                v=np.ascontiguousarray(obs.p[:, 0]), v_lat=np.ascontiguousarray(obs.p[:, 1]),
+                length=np.ascontiguousarray(length, dtype=float),
+                width=np.ascontiguousarray(width, dtype=float), accel=u_prev,
+                is_cav=np.ones(n, bool), static=static, n=n)
+        oq, op = obs.others_q, obs.others_p
+        ol, ow = obs.others_length, obs.others_width
+        oids = obs.others_ids.tolist() if obs.others_ids is not None else [None] * len(oq)
+        self._moved.update(i for i, v in zip(oids, op[:, 0], strict=True)
+                           if i is not None and v > 0.5)
+        v_prev = np.array([self._v_prev.get(i, np.nan) if i is not None else np.nan
+                           for i in oids])
+        a_other = np.where(np.isfinite(v_prev), (op[:, 0] - v_prev) / obs.dt, 0.0)
+        od = self._entering(obs, oq, ow)
+        return _Scene(
+            s=np.concatenate([obs.q[:, 0], oq[:, 0]]),
+            d=np.concatenate([obs.q[:, 1], od]),
+            v=np.concatenate([obs.p[:, 0], op[:, 0]]),
+            v_lat=np.concatenate([obs.p[:, 1], op[:, 1]]),
+            length=np.concatenate([length, ol]).astype(float, copy=False),
+            width=np.concatenate([width, ow]).astype(float, copy=False),
+            accel=np.concatenate([u_prev, a_other]),
+            is_cav=np.concatenate([np.ones(n, bool), np.zeros(len(oq), bool)]),
+            static=np.concatenate([np.zeros(n, bool),
+                                   np.array([i is not None and i not in self._moved
+                                             and abs(v) < 0.5 for i, v in
+                                             zip(oids, op[:, 0], strict=True)], dtype=bool)]),
+            n=n,
+        )
+
+    def _entering(self, obs: Observation, oq: np.ndarray, ow: np.ndarray) -> np.ndarray:
+        """Lateral positions (M,) m of the sensed vehicles as the law uses them: a vehicle
+        still outside the road but within ``entry_reach_m`` of its edge (on an on-ramp
+        about to merge) is taken to be on the road already, at its nearest inside
+        position: CAVs behind it there keep their gap to it, CAVs beside it make room."""
+        p = self.params
+        d = oq[:, 1].copy()
+        if obs.road is None:
+            return d
+        edges = obs.road.edges(oq[:, 0])
+        lo = edges[:, 0] + 0.5 * ow + 0.1
+        hi = edges[:, 1] - 0.5 * ow - 0.1
+        out = np.maximum(lo - d, d - hi)  # > 0: outside by this much
+        merging = (out > 0) & (out < p.entry_reach_m)
+        d[merging] = np.clip(d[merging], lo[merging], np.maximum(lo, hi)[merging])
+        return d
+
+    # ------------------------------------------------------------------ lateral target
+    def _band_edges(self, obs: Observation, sc: _Scene):
+        """Road edges (N, 2) m over the target's look-ahead (the road's narrowest ahead, or
+        the loop's edges, or none: +-inf) and the loop's edges (N, 2) m or None; the kernel
+        takes the narrower of the two and the band of lateral centres inside them."""
+        p = self.params
+        n = sc.n
+        if obs.road is not None:
+            ahead = np.maximum(p.edge_lookahead_min_m, sc.v[:n] * p.edge_lookahead_s)
+            edges = obs.road.narrowest(sc.s[:n], ahead)
+        elif obs.road_edges is not None:
+            edges = obs.road_edges
+        else:
+            edges = np.column_stack([np.full(n, -np.inf), np.full(n, np.inf)])
+        loop_edges = None
+        if obs.road_edges is not None:  # never wider than what the loop enforces
+            loop_edges = np.ascontiguousarray(obs.road_edges, dtype=float)
+        return np.ascontiguousarray(edges, dtype=float), loop_edges
+
+    # ------------------------------------------------------------------ longitudinal
+    def _narrowing(self, obs, sc, side) -> np.ndarray:
+        """Approach bound (N,) m/s^2 to the start of the first road piece ahead (within the
+        look-ahead) whose edges exclude the CAV's body at its lateral position by more than
+        it can still move sideways before it gets there; inf if none."""
+        p = self.params
+        n = sc.n
+        road = obs.road
+        s, d = sc.s[:n], sc.d[:n]
+        half_w = 0.5 * sc.width[:n] + 0.1
+        ds = road.s0[None, :] - s[:, None]  # (N, K)
+        if road.periodic:
+            ds = np.mod(ds, road.length_m)
+        look = np.maximum(p.edge_lookahead_min_m, sc.v[:n] * p.lookahead_s)
+        # lateral shift the body needs to fit the piece, and what it can still do before
+        # reaching it (half the lateral speed limit and half the bound deceleration)
+        need = np.maximum(road.right[None, :] - (d[:, None] - half_w[:, None]),
+                          (d[:, None] + half_w[:, None]) - road.left[None, :])
+        t_avail = np.maximum(ds, 0.0) / np.maximum(sc.v[:n], 1.0)[:, None]
+        can = np.minimum(0.5 * self.lat_speed_max * t_avail,
+                         0.25 * p.a_lat_bound_mps2 * t_avail**2)
+        # a vehicle alongside on the side the CAV must move to blocks it now
+        to_left = road.right[None, :] > d[:, None] - half_w[:, None]
+        room = np.where(to_left, side["hi"][:, None] - d[:, None],
+                        d[:, None] - side["lo"][:, None])
+        can = np.minimum(can, np.maximum(room, 0.0) + 0.1)
+        wall = (ds > 0) & (ds < look[:, None]) & (need > can)
+        if not wall.any():
+            return np.full(n, np.inf)
+        g = np.min(np.where(wall, ds, np.inf), axis=1) - 0.5 * sc.length[:n]
+        return np.where(np.isfinite(g), self._approach(g, np.zeros(n), sc.v[:n]), np.inf)
+
+    def _approach(self, g, v_j, v) -> np.ndarray:
+        """Approach bound ``k_a (v_safe - v)``: come down to the leader's speed at the
+        comfortable deceleration before the gap falls to s0, m/s^2 (element-wise)."""
+        p = self.params
+        b = p.comfort_decel_mps2
+        tau = 0.5
+        g0 = g - p.standstill_gap_m
+        vj = np.maximum(v_j, 0.0)
+        root = np.sqrt(np.maximum((b * tau) ** 2 + vj * vj + 2 * b * g0, 0.0))
+        v_safe = np.where(g0 > 0, -b * tau + root, 0.0)
+        v_safe = np.maximum(v_safe, np.minimum(vj, np.maximum(g0, 0.0)))  # never below 0
+        return p.approach_gain * (v_safe - v)
+
+    def _yield(self, obs, sc, j, ask, u_yield) -> np.ndarray:
+        """Cooperative gap opening (N,) m/s^2 (inf where nobody asks) from the requests of
+        :func:`kernels.interact`, less those a CAV has yielded to too long."""
+        ask = ask & self._patience(obs, sc, j, ask)
+        out = np.min(np.where(ask, u_yield, np.inf), axis=1)
+        self.stats["yields"] += int(np.count_nonzero(np.isfinite(out) & (out < 0)))
+        return out
+
+    def _patience(self, obs, sc, j, ask) -> np.ndarray:
+        """``ask`` (N, K) without the pairs a CAV has yielded to too long (memory by ids)."""
+        p = self.params
+        t = float(obs.t)
+        ids_all = list(obs.ids.tolist()) + (list(obs.others_ids.tolist())
+                                            if obs.others_ids is not None else
+                                            [None] * (len(sc.s) - sc.n))
+        keep = ask.copy()
+        seen = set()
+        rows, cols = np.nonzero(ask)
+        for r, c in zip(rows.tolist(), cols.tolist(), strict=True):
+            key = (obs.ids[r], ids_all[j[r, c]])
+            seen.add(key)
+            start = self._yield_since.setdefault(key, t)
+            waited = t - start
+            if waited > p.yield_timeout_s:
+                keep[r, c] = False
+                if waited > p.yield_timeout_s + p.yield_cooldown_s:
+                    self._yield_since[key] = t  # patience again
+        for key in [k for k, t0 in self._yield_since.items()
+                    if k not in seen and t - t0 <= p.yield_timeout_s]:
+            del self._yield_since[key]  # the pair ended before the timeout
+        return keep
+
+    def _held(self, obs, sc, order, periodic, period) -> np.ndarray:
+        """Non-CAVs (M,) that have moved, are now slower than 3 m/s and have a vehicle ahead
+        in their band within 15 m: they want to merge out and must not be trapped (a
+        stopped obstacle, which never moved, is not held up)."""
+        n = sc.n
+        m = len(sc.s)
+        out = np.zeros(m, bool)
+        if m == n or obs.others_ids is None:
+            return out
+        rows = np.arange(n, m)
+        moved = np.array([i in self._moved for i in obs.others_ids.tolist()], dtype=bool)
+        slow = rows[(sc.v[rows] < 3.0) & moved]
+        if not len(slow):
+            return out
+        rank = np.empty(m, dtype=np.int64)
+        rank[order] = np.arange(m)
+        gap, _ = K.leader_gaps(sc.s, sc.d, sc.length, sc.width, slow, 40.0, periodic, period,
+                               0.0, sc.v, order, rank)
+        out[slow] = gap < 15.0
+        return out
+
+    # ------------------------------------------------------------------ memory
+    def _remember(self, obs, sc, slots, targets, urgent, u) -> None:
+        self._mem_target[slots] = targets
+        self._mem_urgent[slots] = urgent
+        self._mem_u[slots] = u[:, 0]
+        self._mem_last[slots] = self._calls
+        self._calls += 1
+        if obs.others_ids is not None and sc.n < len(sc.s):
+            oids = obs.others_ids.tolist()
+            self._v_prev = {i: float(v) for i, v in zip(oids, sc.v[sc.n:], strict=True)}
+            self._moved.intersection_update(oids)
+        else:
+            self._v_prev = {}

@@ -1,0 +1,184 @@
+"""The lane-free flocking law's parameters (:class:`LaneFreeParams`); the law itself is
+described in :mod:`controllers.road.lanefree`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from controllers.params import ParameterError
+
+
+@dataclass(frozen=True)
+class LaneFreeParams:
+    """Parameters of the lane-free flocking law (SI units; see the module docstring).
+
+    Longitudinal:
+        time_gap_s: time gap T behind a CAV, s.
+        time_gap_hdv_s: time gap behind a human driver or obstacle, s.
+        standstill_gap_m: standstill gap s0, m.
+        kp: spacing gain k_p, 1/s^2. kd: relative-speed gain k_d, 1/s.
+        ff_gain: feed-forward of a CAV leader's acceleration k_ff (0..1).
+        kp_hdv, kd_hdv: gains behind non-CAVs (no acceleration shared), 1/s^2, 1/s.
+        speed_gain: desired-speed gain k_v, 1/s.
+        approach_gain: gain k_a of the approach bound, 1/s.
+        comfort_decel_mps2: deceleration b of the approach bound, m/s^2.
+        spacing_error_min_m: lower clip of ``g - s0 - T v``, m.
+        spacing_error_max_m: range of the linear term beyond the desired gap, m.
+        anticipation_s: horizon over which lateral motion makes a vehicle a leader, s.
+        follow_margin_m: lateral gap below which a vehicle ahead is a leader, m.
+    Lateral:
+        lat_gain: k_y, 1/s^2. lat_damping: c_y, 1/s.
+        a_lat_bound_mps2: lateral deceleration the boundary bounds assume, m/s^2.
+        lateral_clearance_m: side clearance kept to vehicles alongside, m.
+        edge_margin_m: distance kept between the body and the road edge, m.
+        side_buffer_m, side_buffer_speed_s, side_buffer_s: a vehicle counts as alongside
+            within a bumper gap of ``m + s_v v_rear + s * closing speed`` (the rear vehicle's
+            speed and the closing speed of the two), m, s and s.
+        cut_in_gap_m, cut_in_speed_margin_mps: a vehicle also counts as alongside when the
+            follower of the two would be faster than its safe speed (Krauss, emergency
+            braking, one step of reaction) at the bumper gap minus ``cut_in_gap_m``, less
+            ``cut_in_speed_margin_mps`` (stricter than the safety layer's rule), m and m/s.
+        repulsion_gain: barrier repulsion strength, m/s^2.
+        replan_s: period of the lateral target choice, s.
+        candidate_step_m: spacing of candidate lateral positions, m.
+        lookahead_s, lookahead_min_m: stopped obstacles ahead considered for the target (at
+            least ``lookahead_min_m``, or ``lookahead_s`` of travel), s and m.
+        edge_lookahead_min_m, edge_lookahead_s: road edges ahead (a narrowing) bounding the
+            lateral target and position: at least this far, or this long of travel (longer
+            than the loop's 4 s, so a CAV is inside before the safety layer looks), m and s.
+        scan_margin_m: lateral gap below which a vehicle ahead blocks a candidate band, m.
+        scan_time_gap_s: time gap of the offered-speed estimate, s.
+        scan_decel_mps2: deceleration of the offered-speed estimate, m/s^2 (below the
+            approach bound's, so a CAV changes band before it has to brake).
+        move_cost: c_move, (m/s) per m of lateral distance.
+        clear_gain: c_clear, (m/s) per m of lateral clearance (up to ``clear_cap_m``).
+        clear_cap_m: clearance beyond which a candidate gains nothing, m.
+        nudge_gain: c_nudge, (m/s) per (m/s) of desired-speed excess of held-up followers.
+        hysteresis_mps: score gain needed to change target, m/s.
+        order_gain: weight of the desired-speed order ``-c_o |y - y_pref|``, (m/s) per m;
+            ``y_pref`` runs from the right (``bias_speed_low_mps`` and slower) to the left
+            (``bias_speed_high_mps`` and faster) of the road ahead.
+        bias_speed_low_mps, bias_speed_high_mps: desired speeds of the two ends, m/s.
+        urgent_gain_mps: offered-speed gain (and at least 30 % of the own speed) above which
+            a move is announced (others yield), for a CAV faster than ``queue_speed_mps``;
+            a move out of a band blocked by a stopped obstacle is always announced, m/s.
+        queue_speed_mps, queue_hysteresis: below this speed (m/s) the score gain needed to
+            change target rises by ``queue_hysteresis`` (m/s per m/s): in a slow queue
+            lateral moves do not pay.
+    Cooperation:
+        coop_time_gap_s: time gap to a virtual leader (an announced mover), s.
+        yield_decel_mps2: strongest braking to let a mover in, m/s^2.
+        yield_timeout_s, yield_cooldown_s: a CAV lets the same vehicle in for at most this
+            long, then goes on for the cool-down, s (nothing waits forever).
+        zipper_slack_m: a CAV closer behind a mover than ``side_buffer_m`` plus this cannot
+            let it in (the mover needs that gap beside it) and goes on instead, m.
+        window: neighbours in road order looked at on each side of a CAV.
+        entry_reach_m: a vehicle outside the road within this distance of its edge (about
+            to merge from an on-ramp) counts as on the road at its nearest inside
+            position, m.
+    Comparison:
+        lateral_mode: "free" (the lane-free law) or "fixed": every CAV keeps the lateral
+            position it entered with (rows, or lanes on a lane network): the same
+            longitudinal law without lateral freedom, to isolate the lane-free gain.
+    """
+
+    time_gap_s: float = 0.55
+    time_gap_hdv_s: float = 0.9
+    standstill_gap_m: float = 2.5
+    kp: float = 0.6
+    kd: float = 0.95
+    ff_gain: float = 0.6
+    kp_hdv: float = 0.55
+    kd_hdv: float = 1.6
+    speed_gain: float = 0.6
+    approach_gain: float = 1.5
+    comfort_decel_mps2: float = 2.5
+    spacing_error_min_m: float = -3.0
+    spacing_error_max_m: float = 10.0
+    anticipation_s: float = 1.0
+    follow_margin_m: float = 0.35
+    lat_gain: float = 0.6
+    lat_damping: float = 1.6
+    a_lat_bound_mps2: float = 1.0
+    lateral_clearance_m: float = 0.5
+    edge_margin_m: float = 0.2
+    side_buffer_m: float = 2.2
+    side_buffer_speed_s: float = 0.3
+    side_buffer_s: float = 1.5
+    cut_in_gap_m: float = 2.2
+    cut_in_speed_margin_mps: float = 0.5
+    repulsion_gain: float = 0.8
+    replan_s: float = 0.5
+    candidate_step_m: float = 0.3
+    lookahead_s: float = 5.0
+    lookahead_min_m: float = 400.0
+    edge_lookahead_min_m: float = 100.0
+    edge_lookahead_s: float = 8.0
+    scan_margin_m: float = 0.35
+    scan_time_gap_s: float = 4.0
+    scan_decel_mps2: float = 1.0
+    move_cost: float = 0.2
+    clear_gain: float = 0.3
+    clear_cap_m: float = 0.6
+    nudge_gain: float = 0.3
+    hysteresis_mps: float = 0.5
+    order_gain: float = 0.2
+    urgent_gain_mps: float = 2.0
+    queue_speed_mps: float = 10.0
+    queue_hysteresis: float = 0.5
+    bias_speed_low_mps: float = 25.0
+    bias_speed_high_mps: float = 35.0
+    coop_time_gap_s: float = 0.35
+    yield_timeout_s: float = 8.0
+    yield_cooldown_s: float = 6.0
+    zipper_slack_m: float = 0.3
+    yield_decel_mps2: float = 2.0
+    window: int = 16
+    entry_reach_m: float = 6.0
+    lateral_mode: str = "free"
+
+    def __post_init__(self) -> None:
+        if self.lateral_mode not in ("free", "fixed"):
+            raise ParameterError(f"lateral_mode must be 'free' or 'fixed', got "
+                                 f"{self.lateral_mode!r}")
+        for name, value in self.__dict__.items():
+            if name == "lateral_mode":
+                continue
+            if name == "window":
+                if isinstance(value, bool) or not isinstance(value, int) or value < 2:
+                    raise ParameterError(f"window must be an integer >= 2, got {value!r}")
+                continue
+            if isinstance(value, bool) or not isinstance(value, int | float) \
+                    or not np.isfinite(value):
+                raise ParameterError(f"{name} must be a finite number, got {value!r}")
+        positive = ("time_gap_s", "time_gap_hdv_s", "comfort_decel_mps2", "a_lat_bound_mps2",
+                    "replan_s", "candidate_step_m", "lookahead_s", "scan_time_gap_s",
+                    "coop_time_gap_s", "yield_decel_mps2", "speed_gain", "scan_decel_mps2",
+                    "yield_timeout_s", "yield_cooldown_s")
+        for name in positive:
+            if not getattr(self, name) > 0:
+                raise ParameterError(f"{name} must be > 0, got {getattr(self, name)!r}")
+        for name in ("standstill_gap_m", "kp", "kd", "ff_gain", "kp_hdv", "kd_hdv",
+                     "approach_gain", "spacing_error_max_m", "anticipation_s",
+                     "follow_margin_m", "lat_gain", "lat_damping", "lateral_clearance_m",
+                     "edge_margin_m", "side_buffer_m", "side_buffer_s", "repulsion_gain",
+                     "side_buffer_speed_s", "zipper_slack_m",
+                     "lookahead_min_m", "edge_lookahead_min_m",
+                     "edge_lookahead_s", "scan_margin_m", "move_cost", "clear_gain",
+                     "clear_cap_m", "nudge_gain", "hysteresis_mps", "order_gain",
+                     "bias_speed_low_mps", "urgent_gain_mps", "bias_speed_high_mps",
+                     "queue_speed_mps", "queue_hysteresis", "entry_reach_m",
+                     "cut_in_gap_m", "cut_in_speed_margin_mps"):
+            if getattr(self, name) < 0:
+                raise ParameterError(f"{name} must be >= 0, got {getattr(self, name)!r}")
+        if self.spacing_error_min_m > 0:
+            raise ParameterError("spacing_error_min_m must be <= 0")
+        if self.ff_gain > 1:
+            raise ParameterError(f"ff_gain must be in [0, 1], got {self.ff_gain!r}")
+
+    def string_stability_margin(self) -> float:
+        """``k_p T^2 + 2 k_d T - 2 (1 - k_ff)`` (>= 0: the low-frequency condition holds)."""
+        T = self.time_gap_s
+        return self.kp * T * T + 2 * self.kd * T - 2 * (1 - self.ff_gain)
