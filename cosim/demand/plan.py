@@ -1,8 +1,10 @@
 """Which vehicles depart when and where: the demand as plain data (no SUMO).
 
 :func:`plan_vehicles` draws every vehicle of a run from the :class:`DemandSpec`, the
-road and the seed (``numpy.random.default_rng(seed)``): kind (CAV or human driver),
-size class, desired speed, departure time, lateral position and speed. The SUMO
+road and the seed (one generator per origin and quantity, seeded with
+``SeedSequence([seed, origin, quantity])``; a ring's placement: ``default_rng(seed)``):
+kind (CAV or human driver), size class, desired speed, departure time, lateral position
+and speed. The SUMO
 route file (:mod:`cosim.demand.routes`) and the SUMO-free road world
 (:mod:`cosim.sim.road_world`) both consume this plan.
 
@@ -61,10 +63,24 @@ class _Vehicle:
     v0_mps: float | None = None  # departure speed, m/s (None: the desired speed)
 
 
+#: Exponential headways are drawn in chunks of this many (any horizon draws the same
+#: sequence: a longer run's first departures are a shorter run's).
+ARRIVAL_CHUNK = 256
+#: Vehicles per block of the CAV/HDV assignment (see :func:`_kinds`).
+KIND_BLOCK = 20
+#: Independent random streams of an open-road origin (each its own generator).
+_STREAMS = ("arrivals", "kinds", "classes", "speeds", "lateral", "lanes", "ramp_lateral")
+
+
 def arrival_times(
     rate_vph: float, duration_s: float, process: str, rng: np.random.Generator
 ) -> np.ndarray:
-    """Departure times (s) in [0, duration_s) for a stream of ``rate_vph`` veh/h."""
+    """Departure times (s) in [0, duration_s) for a stream of ``rate_vph`` veh/h.
+
+    Prefix-stable: with the same generator state, the times below any ``T`` do not depend
+    on ``duration_s >= T`` (uniform: one phase draw; Poisson: headways drawn in chunks of
+    :data:`ARRIVAL_CHUNK`).
+    """
     if rate_vph <= 0:
         return np.zeros(0)
     mean_h = 3600.0 / rate_vph
@@ -72,27 +88,55 @@ def arrival_times(
         n = int(math.ceil(duration_s / mean_h)) + 1
         times = (np.arange(n) + rng.uniform()) * mean_h
     else:
-        n_guess = int(duration_s / mean_h * 1.5) + 20
-        times = np.cumsum(rng.exponential(mean_h, size=n_guess))
-        while times[-1] < duration_s:
-            more = np.cumsum(rng.exponential(mean_h, size=n_guess)) + times[-1]
-            times = np.concatenate([times, more])
+        parts = [np.cumsum(rng.exponential(mean_h, size=ARRIVAL_CHUNK))]
+        while parts[-1][-1] < duration_s:
+            parts.append(np.cumsum(rng.exponential(mean_h, size=ARRIVAL_CHUNK)) + parts[-1][-1])
+        times = np.concatenate(parts)
     return times[times < duration_s]
 
 
 def _kinds(n: int, share: float, rng: np.random.Generator) -> np.ndarray:
-    """Boolean CAV mask for n vehicles: exactly round(share * n) True, at random places."""
+    """Boolean CAV mask for n vehicles in arrival order, prefix-stable.
+
+    Block ``b`` of :data:`KIND_BLOCK` vehicles holds ``round(share B (b+1)) -
+    round(share B b)`` CAVs at random places within it, so every whole-block prefix holds
+    exactly ``round(share x its length)`` CAVs; a prefix that ends inside a block is off by
+    at most that block's CAV count.
+    """
+    n_blocks = -(-n // KIND_BLOCK)
+    out = np.zeros(n_blocks * KIND_BLOCK, dtype=bool)
+    for b in range(n_blocks):
+        k = int(round(share * KIND_BLOCK * (b + 1))) - int(round(share * KIND_BLOCK * b))
+        out[b * KIND_BLOCK + rng.permutation(KIND_BLOCK)[:k]] = True
+    return out[:n]
+
+
+def _kinds_exact(n: int, share: float, rng: np.random.Generator) -> np.ndarray:
+    """Boolean CAV mask for n vehicles placed at once (a ring): exactly round(share * n)
+    True, at random places."""
     is_cav = np.zeros(n, dtype=bool)
     is_cav[rng.permutation(n)[: int(round(share * n))]] = True
     return is_cav
 
 
-def _draw_common(n: int, demand: DemandSpec, rng: np.random.Generator):
-    """Kind mask, size class index and desired speed (m/s) for n vehicles."""
-    is_cav = _kinds(n, demand.cav_share, rng)
-    cls = rng.choice(len(demand.size_classes), size=n, p=demand.class_probabilities)
+def _streams(seed: int, origin: str) -> dict[str, np.random.Generator]:
+    """One generator per quantity of an origin's stream (``SeedSequence([seed, o, q])``):
+    every quantity is prefix-stable on its own, whatever the number of vehicles."""
+    o = {"main": 0, "ramp": 1}[origin]
+    return {name: np.random.default_rng(np.random.SeedSequence([seed, o, q]))
+            for q, name in enumerate(_STREAMS)}
+
+
+def _draw_common(n: int, demand: DemandSpec, rng: np.random.Generator,
+                 streams: dict[str, np.random.Generator] | None = None):
+    """Kind mask, size class index and desired speed (m/s) for n vehicles (from
+    ``streams`` when given, else all from ``rng``)."""
+    g = streams or {"kinds": rng, "classes": rng, "speeds": rng}
+    kinds = _kinds if streams else _kinds_exact
+    is_cav = kinds(n, demand.cav_share, g["kinds"])
+    cls = g["classes"].choice(len(demand.size_classes), size=n, p=demand.class_probabilities)
     low, high = demand.desired_speed_mps
-    speed = rng.uniform(low, high, size=n)
+    speed = g["speeds"].uniform(low, high, size=n)
     return is_cav, cls, speed
 
 
@@ -105,18 +149,22 @@ def _lateral(width_road: float, width_car: np.ndarray, how: str, rng: np.random.
 
 
 def _open_stream(
-    net: RoadNetwork, demand: DemandSpec, rng: np.random.Generator,
+    net: RoadNetwork, demand: DemandSpec, seed: int,
     origin: str, rate_vph: float, road_width: float, horizon_s: float,
 ) -> list[_Vehicle]:
-    times = arrival_times(rate_vph, horizon_s, demand.arrivals, rng)
+    """An origin's vehicles: each quantity from its own generator, so a longer horizon
+    only appends vehicles (prefix-stable)."""
+    g = _streams(seed, origin)
+    times = arrival_times(rate_vph, horizon_s, demand.arrivals, g["arrivals"])
     n = len(times)
-    is_cav, cls, speed = _draw_common(n, demand, rng)
+    is_cav, cls, speed = _draw_common(n, demand, g["kinds"], g)
     widths = np.array([demand.size_classes[c][1] for c in cls])
-    lat = _lateral(road_width, widths, demand.depart_lateral, rng)
+    lat = _lateral(road_width, widths, demand.depart_lateral, g["lateral"])
     if origin == "ramp":  # at the ramp's right side: it joins the road on the right
-        lat = -(0.5 * road_width - 0.5 * widths - DEPART_EDGE_MARGIN_M) + rng.uniform(
-            0.0, 0.4, size=n)
-    lanes = _depart_lanes(net, n, demand.depart_lateral, rng) if origin == "main" else None
+        lat = -(0.5 * road_width - 0.5 * widths - DEPART_EDGE_MARGIN_M) + g[
+            "ramp_lateral"].uniform(0.0, 0.4, size=n)
+    lanes = (_depart_lanes(net, n, demand.depart_lateral, g["lanes"]) if origin == "main"
+             else None)
     slotted = demand.insertion == "slots" and origin == "main" and net.n_lanes == 1 and n > 0
     if slotted:
         lengths = np.array([demand.size_classes[c][0] for c in cls])
@@ -435,17 +483,18 @@ class DemandPlan:
 def plan_vehicles(net: RoadNetwork, demand: DemandSpec, seed: int, horizon_s: float) -> DemandPlan:
     """The run's vehicles (see the module docstring): departures in ``[0, horizon_s)``, s.
 
-    Deterministic in (``net``, ``demand``, ``seed``, ``horizon_s``).
+    Deterministic in (``net``, ``demand``, ``seed``, ``horizon_s``), and prefix-stable on
+    open roads: a longer horizon keeps every vehicle of a shorter one (same id, kind,
+    size, desired speed, departure) and appends the rest.
     """
-    rng = np.random.default_rng(seed)
     if net.periodic:
-        vehicles = _ring_vehicles(net, demand, rng)
+        vehicles = _ring_vehicles(net, demand, np.random.default_rng(seed))
         return DemandPlan(vehicles, "ring_initial", ring_route_repeat(net, horizon_s))
-    vehicles = _open_stream(net, demand, rng, "main", demand.inflow_vph, float(net.width_at(0)),
-                            horizon_s)
+    vehicles = _open_stream(net, demand, seed, "main", demand.inflow_vph,
+                            float(net.width_at(0)), horizon_s)
     if net.ramp_route and demand.ramp_inflow_vph > 0:
         ramp_w = net.ramp_width_m or net.width_m
-        vehicles += _open_stream(net, demand, rng, "ramp", demand.ramp_inflow_vph, ramp_w,
+        vehicles += _open_stream(net, demand, seed, "ramp", demand.ramp_inflow_vph, ramp_w,
                                  horizon_s)
     vehicles.sort(key=lambda v: (v.depart, v.vid))
     return DemandPlan(vehicles, demand.arrivals)
