@@ -22,7 +22,11 @@ Rules, applied in this order to CAV ``i`` with command ``u_i``:
    within reach, when sharing a band with it would leave the follower of the
    two (the CAV behind it, or it behind the CAV) faster than the Krauss safe
    speed of rule 3, so a CAV never moves sideways in front of a vehicle that
-   could not stop behind it, nor behind one it could not stop behind.
+   could not stop behind it, nor behind one it could not stop behind. A vehicle in the
+   CAV's band (lateral gap below ``lateral_clearance``) ahead of it, or behind it and able
+   to stop behind it, without longitudinal overlap, is a leader or follower, not a side
+   neighbour: rule 3 holds the CAV off a leader, and the CAV may move sideways out of the
+   band (e.g. from behind a stopped car).
 3. **Safe speed** (longitudinal, Krauss 1998 / SUMO's default model): with
    ``g`` the bumper-to-bumper gap minus ``min_gap`` to the nearest vehicle
    ahead that overlaps laterally anywhere along the lateral move, the next speed
@@ -342,10 +346,18 @@ def _apply_kernel(u, cav_index, v_lat, s_all, d_all, v_all, len_all, wid_all, vl
                 v_follow, v_lead = v_j, v
             beside = abs(ds) < half_l + buf
             gap_pair = abs(ds) - half_l - min_gap
-            if v_follow > _krauss(gap_pair, v_lead, bt2, mbt, b, bl, two_b) + 1e-9:
+            unsafe = v_follow > _krauss(gap_pair, v_lead, bt2, mbt, b, bl, two_b) + 1e-9
+            if unsafe:
                 beside = True
+            half_w = 0.5 * (W + wid_all[j])
+            if (beside and abs(dd) < half_w + lat_clear and abs(ds) >= half_l
+                    and (ds > 0 or not unsafe)):
+                # in one band, one behind the other: a leader (rule 3 holds the CAV off)
+                # or a follower that can stop behind it, not a neighbour at one side (its
+                # side is undefined; a CAV stopped behind a car must be able to move out
+                # from behind it)
+                beside = False
             if beside:
-                half_w = 0.5 * (W + wid_all[j])
                 shift = shift_cav if is_cav[j] else abs(vlat_all[j]) * dt
                 need = half_w + lat_clear + shift
                 if dd >= 0:

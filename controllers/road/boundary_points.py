@@ -8,6 +8,14 @@ lateral position and moves at the time-gap reference speed
 (:func:`controllers.road_reference.time_gap_reference`). Then the run's actuator
 box and jerk limit, and a lateral damping ``u_lat -= c_d v_lat`` (clipped).
 
+A stopped car is a local minimum of seed 003's potential field on a road: the gamma-agent
+straight ahead pulls a CAV into the car, the car's boundary points push it back, and the
+CAV stays behind it (measured: 35-70 s in the built-in ``obstacle_seed003`` scenario). The
+adapter adds a road navigation term for that case only: a CAV with a stopped vehicle
+(slower than ``STOPPED_MPS``) ahead in its band within ``BP_GOAL_AHEAD_M`` gets
+``u_lat += k_nav (d_goal - d) - c_nav v_lat`` towards the nearest side of that vehicle that
+fits inside the road (:func:`lateral_goal`); the law is unchanged everywhere else.
+
 Road edges are not boundary points: every car is always within seed 003's
 early-warning distance of both edges of a 10.2 m road, so edge points jam the flock
 (measured: 0.5 m/s mean speed with them); the edges are the safety layer's.
@@ -27,6 +35,9 @@ from controllers.road_reference import time_gap_reference
 
 BP_GOAL_AHEAD_M = 50.0  # m: seed 003's gamma-agent placed this far ahead of each CAV
 BP_SPACING_M = 1.0  # m: spacing of boundary points on vehicle perimeters
+STOPPED_MPS = 1.0  # m/s: a sensed vehicle slower than this is a stopped one to pass
+K_NAV = 0.6  # 1/s^2: lateral navigation gain around a stopped vehicle
+C_NAV = 1.2  # 1/s: its damping
 
 
 @dataclass(frozen=True)
@@ -90,6 +101,54 @@ def perimeter_points(q: np.ndarray, p: np.ndarray, length: np.ndarray, width: np
     return np.vstack(pts), np.vstack(vel)
 
 
+def lateral_goal(obs: Observation, reach_m: float, margin_m: float) -> tuple[np.ndarray,
+                                                                              np.ndarray]:
+    """Lateral goal (N,) m of each CAV blocked by a stopped vehicle, and the mask (N,) of
+    the blocked ones: the nearest stopped vehicle ahead in the CAV's band (lateral gap
+    below ``margin_m``) within ``reach_m`` (m, bumper to bumper); the goal is beside it, on
+    the side nearer to the CAV that keeps the body ``margin_m`` (m) from it and inside the
+    road edges (``obs.road_edges``); a CAV for which neither side fits is not blocked.
+
+    Cost: one pass over the stopped vehicles (few) with (N,) arrays each.
+    """
+    d = obs.q[:, 1].astype(float)
+    n = len(d)
+    goal = d.copy()
+    blocked = np.zeros(n, bool)
+    if obs.others_q is None or not len(obs.others_q):
+        return goal, blocked
+    stopped = np.flatnonzero(np.abs(obs.others_p[:, 0]) < STOPPED_MPS)
+    if not len(stopped):
+        return goal, blocked
+    w = obs.width if obs.width is not None else np.zeros(n)
+    length = obs.length if obs.length is not None else np.zeros(n)
+    if obs.road_edges is not None:
+        right, left = obs.road_edges[:, 0], obs.road_edges[:, 1]
+    else:
+        right, left = np.full(n, -np.inf), np.full(n, np.inf)
+    nearest = np.full(n, np.inf)
+    for k in stopped.tolist():
+        ds = obs.others_q[k, 0] - obs.q[:, 0]
+        if obs.period_s is not None:
+            ds = np.mod(ds, obs.period_s)
+        gap = ds - 0.5 * (length + obs.others_length[k])
+        half = 0.5 * (w + obs.others_width[k]) + margin_m
+        dk = obs.others_q[k, 1]
+        to_left, to_right = dk + half, dk - half
+        fits_left = to_left + 0.5 * w + margin_m <= left
+        fits_right = to_right - 0.5 * w - margin_m >= right
+        hit = ((ds > 0) & (gap < reach_m) & (np.abs(d - dk) < half) & (gap < nearest)
+               & (fits_left | fits_right))
+        if not hit.any():
+            continue
+        prefer_left = np.abs(to_left - d) <= np.abs(to_right - d)
+        side = np.where(fits_left & (prefer_left | ~fits_right), to_left, to_right)
+        goal[hit] = side[hit]
+        blocked[hit] = True
+        nearest[hit] = gap[hit]
+    return goal, blocked
+
+
 class RoadBoundaryPoints:
     """Seed 003's law on the road (see the module docstring)."""
 
@@ -140,5 +199,9 @@ class RoadBoundaryPoints:
         u = self.law.compute(inner)
         if p.lateral_damping > 0:
             u[:, 1] -= p.lateral_damping * obs.p[:, 1]
-            u[:, 1] = np.clip(u[:, 1], -self.lat_max_mps2, self.lat_max_mps2)
+        goal, blocked = lateral_goal(obs, BP_GOAL_AHEAD_M, p.lateral_margin_m)
+        if blocked.any():
+            u[blocked, 1] = (K_NAV * (goal[blocked] - obs.q[blocked, 1])
+                             - C_NAV * obs.p[blocked, 1])
+        u[:, 1] = np.clip(u[:, 1], -self.lat_max_mps2, self.lat_max_mps2)
         return u

@@ -21,11 +21,13 @@ the code before the speed-ups of issue 15) and writes:
 ``tests/test_exactness.py`` compares the current code with both files.
 
 The law and safety references depend on nothing else (the observations are stored). The
-runs depend on the whole co-simulation (demand, vehicle types, worlds): when one of those
-changes on purpose, record the runs again (``--parts traj``) with ``--root`` a copy of the
-current tree in which the files sped up by issue 15 (``controllers/road/lanefree*``,
-``controllers/safety.py``, ``controllers/observation.py``, ``cosim/sim/loop.py``,
-``cosim/sumo/world.py``) are the numpy versions from before it.
+runs depend on the whole co-simulation (demand, vehicle types, worlds, law, safety layer).
+When behaviour changes on purpose, record again what changed (``--parts traj`` for the
+runs, ``--parts law`` for the law and safety replays) on the current tree, in a commit of
+its own that says why; never to make a speed-up pass. History: recorded on the numpy code
+before issue 15's speed-ups (the numba kernels matched it bit for bit); runs recorded again
+for the prefix-stable demand and calibrated human drivers, and for the zipper and
+held-driver rules of the lane-free law and the safety layer's in-band rule.
 """
 
 from __future__ import annotations

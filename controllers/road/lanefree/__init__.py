@@ -78,7 +78,8 @@ same time gap, braking at most at the comfortable deceleration. A CAV behind the
 would have to brake harder than ``yield_decel_mps2`` to let it in, or is already closer
 behind it than the gap the mover needs beside it, goes on instead, and the mover, which
 computes the same test, falls in behind it (zipper order: the one further ahead goes first
-unless the other cannot let it in; nothing waits for a vehicle that waits for it). Human
+unless the other cannot let it in; nothing waits for a vehicle that waits for it, and the
+mover waits only for a vehicle behind that moves, faster than 1 m/s). Human
 drivers are not cooperative: a slow or stopped human driver whose own band is blocked
 ahead is given the same yield by the CAVs behind it in the neighbouring bands, so it can
 merge out (nobody traps it).

@@ -64,6 +64,11 @@ def pack(p, long_min: float, long_max: float, lat_speed_max: float, emergency_de
     return np.array(vals, dtype=float)
 
 
+#: A vehicle behind a mover in its target band goes first (zipper) only when faster than
+#: this, m/s: at a standstill the one ahead goes, or both would wait for each other.
+ZIPPER_MOVING_MPS = 1.0
+
+
 # ------------------------------------------------------------------ helpers
 @njit(cache=True, inline="always")
 def pairwise_sum(a, n):
@@ -440,7 +445,10 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
                         u_let = _follow(P, g_back, v_i, accel[i], True, v_j, P[CT], P[CT])
                         if not np.isfinite(u_let):
                             u_let = 0.0
-                        passes = (u_let < -P[YD]) or (g_back < P[ZG])
+                        # it goes first only if it is moving: a stopped vehicle
+                        # behind passes nobody (the mover would wait for it forever)
+                        passes = ((u_let < -P[YD]) or (g_back < P[ZG])) and (
+                            v_j > ZIPPER_MOVING_MPS)
                     if ahead or passes:
                         u_z = _follow(P, g, v_j, accel[jj], j_cav, v_i, P[CT], P[CT])
                         u_z = max(u_z, -P[CB])

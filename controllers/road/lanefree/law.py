@@ -356,24 +356,47 @@ class LaneFreeFlocking:
         return keep
 
     def _held(self, obs, sc, order, periodic, period) -> np.ndarray:
-        """Non-CAVs (M,) that have moved, are now slower than 3 m/s and have a vehicle ahead
-        in their band within 15 m: they want to merge out and must not be trapped (a
-        stopped obstacle, which never moved, is not held up)."""
+        """Non-CAVs (M,) held up by a stopped obstacle: they have moved, are now slower than
+        3 m/s, and the nearest vehicle ahead in their band, within 15 m (bumper to bumper),
+        is one that never moved (a stopped obstacle). They want to merge out and must not be
+        trapped. A human queued behind moving or merely slow traffic is not held: the CAVs
+        beside it owe it nothing (yielding to every human in a queue would stop the free
+        bands for them)."""
         n = sc.n
         m = len(sc.s)
         out = np.zeros(m, bool)
         if m == n or obs.others_ids is None:
             return out
+        oids = obs.others_ids.tolist()
         rows = np.arange(n, m)
-        moved = np.array([i in self._moved for i in obs.others_ids.tolist()], dtype=bool)
+        moved = np.array([i in self._moved for i in oids], dtype=bool)
         slow = rows[(sc.v[rows] < 3.0) & moved]
         if not len(slow):
             return out
-        rank = np.empty(m, dtype=np.int64)
-        rank[order] = np.arange(m)
-        gap, _ = K.leader_gaps(sc.s, sc.d, sc.length, sc.width, slow, 40.0, periodic, period,
-                               0.0, sc.v, order, rank)
-        out[slow] = gap < 15.0
+        static = np.zeros(m, bool)
+        static[n:] = ~moved
+        if not static.any():
+            return out
+        cand = np.flatnonzero(static)
+        for r in slow.tolist():
+            ds = sc.s[cand] - sc.s[r]
+            if periodic:
+                ds = np.mod(ds, period)
+            gap = ds - 0.5 * (sc.length[cand] + sc.length[r])
+            overlap = np.abs(sc.d[cand] - sc.d[r]) < 0.5 * (sc.width[cand] + sc.width[r])
+            ahead = (ds > 0) & overlap & (gap < 15.0)
+            if not ahead.any():
+                continue
+            # nearest vehicle ahead in the band (any kind) must be the static one
+            allv = np.arange(m)
+            ds_all = sc.s - sc.s[r]
+            if periodic:
+                ds_all = np.mod(ds_all, period)
+            ov_all = np.abs(sc.d - sc.d[r]) < 0.5 * (sc.width + sc.width[r])
+            ov_all[r] = False
+            near = allv[(ds_all > 0) & ov_all]
+            if len(near) and static[near[np.argmin(ds_all[near])]]:
+                out[r] = True
         return out
 
     # ------------------------------------------------------------------ memory
