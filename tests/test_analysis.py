@@ -574,3 +574,181 @@ def test_gif_frames_keep_their_x_axis_label_inside_the_picture(tmp_path):
     assert ax.get_title() == "Top view: demo"
     _axes_with_units(fig)
     plt.close(fig)
+
+
+# --------------------------------------------------------------------------------------
+# Rejected points and the headline experiment (issue 13)
+# --------------------------------------------------------------------------------------
+
+
+def _headline_rows():
+    """A synthetic headline sweep: bottleneck arms, TUM's ring, a ring FD."""
+    rows = []
+
+    def row(variant, **kw):
+        base = {"run_id": variant.replace("/", "_").replace("#", "_"), "status": "ok",
+                "error": "", "sweep": "headline", "variant": variant, "seed": 1,
+                "controller.kind": "flocking", "controller.params.time_gap_s": 0.6,
+                "collisions_geometric_cav": 0, "collisions_geometric_hdv_only": 0,
+                "min_ttc_s": 2.0, "tet_veh_s": 1.0, "measured_vehicle_s": 1000.0,
+                "harsh_accel_share_cav": 0.01, "harsh_accel_share_hdv": np.nan,
+                "safety_activations_per_cav_km": 0.5, "stationary": True,
+                "flow_drift": 0.005, "entrance_limited": False, "bottleneck_kind": "",
+                "bottleneck_active": False, "discharge_flow_vph": np.nan,
+                "discharge_stationary": False, "capacity_note": ""}
+        base.update(kw)
+        rows.append(base)
+
+    for seed, q in zip((1, 2, 3), (5000.0, 5200.0, 5400.0), strict=True):
+        row(f"bottleneck/lanefree#{seed}", seed=seed, **{
+            "network.kind": "varying_width", "demand.inflow_vph": 7000.0,
+            "demand.cav_share": 1.0, "bottleneck_kind": "width_drop",
+            "bottleneck_active": True, "discharge_flow_vph": q, "edie_flow_vph": q,
+            "discharge_stationary": seed != 3})
+    row("bottleneck/cav95#1", **{"network.kind": "varying_width", "demand.inflow_vph": 7000.0,
+        "demand.cav_share": 0.95, "bottleneck_kind": "width_drop", "bottleneck_active": True,
+        "discharge_flow_vph": 4900.0, "edie_flow_vph": 4900.0, "discharge_stationary": True})
+    for seed in (1, 2):
+        row(f"bottleneck/hdv_sl2015#{seed}", seed=seed, **{
+            "network.kind": "varying_width", "demand.inflow_vph": 7000.0,
+            "demand.cav_share": 0.0, "bottleneck_kind": "width_drop", "edie_flow_vph": 1500.0,
+            "entrance_limited": seed == 2,
+            "capacity_note": "bottleneck never active (no queue upstream with free flow "
+                             "downstream)"})
+    for share, flows in ((0.0, (8000.0, 8100.0, 8200.0)), (0.95, (9000.0, 9400.0, 9800.0)),
+                         (1.0, (12000.0, 12100.0, 12200.0))):
+        for seed, q in enumerate(flows, start=1):
+            row(f"tum_ring/cav{round(100 * share)}#{seed}", seed=seed, **{
+                "network.kind": "ring", "demand.ring_density_vpkm": 225.0,
+                "demand.cav_share": share, "edie_flow_vph": q, "edie_density_vpkm": 225.0,
+                "space_mean_speed_mps": q / 225.0 / 3.6,
+                "stationary": not (share == 0.95 and seed == 3),
+                "flow_drift": 0.05 if (share == 0.95 and seed == 3) else 0.0})
+    for mode, factor in (("lanefree", 1.0), ("fixed4", 1.25), ("rows3", 0.95)):
+        for k in (125.0, 225.0):
+            q = factor * (12000.0 if k == 125.0 else 9000.0)
+            row(f"ring_fd/{mode}_T0.6#k{k:g}_s1", **{
+                "network.kind": "ring", "demand.ring_density_vpkm": k, "demand.cav_share": 1.0,
+                "controller.params.lateral_mode": "free" if mode == "lanefree" else "fixed",
+                "edie_flow_vph": q, "edie_density_vpkm": k, "space_mean_speed_mps": q / k / 3.6,
+                "stationary": not (mode == "lanefree" and k == 225.0),
+                "flow_drift": 0.03 if (mode == "lanefree" and k == 225.0) else 0.0})
+    return rows
+
+
+@pytest.fixture
+def headline_dir(tmp_path):
+    pd.DataFrame(_headline_rows()).to_csv(tmp_path / "results.csv", index=False)
+    (tmp_path / "sweep.json").write_text(json.dumps({"name": "headline", "axes": {},
+                                                     "variants": [], "seeds": None}))
+    return tmp_path
+
+
+def test_runs_named_arm_hash_run_are_grouped_by_arm(headline_dir):
+    res = an.load_results(headline_dir)
+    assert res.series_cols == ["arm"] and res.demand_col == "demand_level"
+    assert set(res.table["part"]) == {"bottleneck", "tum_ring", "ring_fd"}
+    fd = res.table[res.table["arm"] == "ring_fd/lanefree_T0.6"]
+    assert sorted(fd["demand_level"]) == [125.0, 225.0]  # ring: the density
+    bn = res.table[res.table["arm"] == "bottleneck/lanefree"]
+    assert set(bn["demand_level"]) == {7000.0}  # open road: the inflow
+    runs = an.fd_runs(res)
+    assert {"stationary", "entrance_limited", "flow_drift"} <= set(runs.columns)
+    assert runs["stationary"].dtype == "boolean"
+
+
+def test_discharge_table_counts_only_active_runs_not_limited_by_their_entrance(headline_dir):
+    d = an.discharge_table(an.load_results(headline_dir)).set_index("arm")
+    lf = d.loc["bottleneck/lanefree"]
+    assert (lf["n_runs"], lf["n_valid"], lf["n_stationary"]) == (3, 3, 2)
+    half = stats.t.ppf(0.975, 2) * 200.0 / math.sqrt(3)
+    assert lf["discharge_vph"] == pytest.approx(5200.0)
+    assert lf["discharge_ci_low_vph"] == pytest.approx(5200.0 - half)
+    hdv = d.loc["bottleneck/hdv_sl2015"]
+    assert hdv["n_valid"] == 0 and math.isnan(hdv["discharge_vph"])
+    assert "never active" in hdv["why_rejected"]
+    assert "tum_ring/cav0" not in d.index  # rings have no bottleneck
+
+
+def test_headline_tables_beside_tum_with_losses_and_gains(headline_dir):
+    from cosim.analysis import headline as hl
+
+    res = an.load_results(headline_dir)
+    t = hl.headline_tables(res)
+    bn = t["headline_bottleneck"].set_index("arm")
+    assert bn.loc["bottleneck/lanefree", "capacity_vph"] == pytest.approx(5200.0)
+    assert bn.loc["bottleneck/lanefree", "label"] == "lane-free flocking CAVs, T = 0.6 s"
+    assert bn.loc["bottleneck/hdv_sl2015", "label"] == "SL2015 drivers, lane-free"
+    assert bn.loc["bottleneck/lanefree", "tet_share"] == pytest.approx(1e-3)
+    tum = t["headline_tum_ring"].set_index("cav_share")
+    assert tum.loc[1.0, "tum_vph"] == 15504.0 and tum.loc[0.0, "tum_vph"] == 6613.0
+    assert tum.loc[1.0, "ours_over_tum"] == pytest.approx(12100.0 / 15504.0)
+    assert tum.loc[0.95, "n_stationary"] == 2 and tum.loc[0.95, "n_runs"] == 3
+    loss = t["headline_hdv5_loss"].set_index("where")
+    ring = loss.loc["TUM ring, flow at 225 veh/km"]
+    assert ring["loss"] == pytest.approx(1 - 9400.0 / 12100.0) and ring["separated"]
+    bn_loss = loss.loc["bottleneck, queue discharge"]  # one 95 % run: no interval
+    assert bn_loss["loss"] == pytest.approx(1 - 4900.0 / 5200.0)
+    assert math.isnan(bn_loss["ci_low"])
+    gain = t["headline_lanefree_gain"].set_index("ring_density_vpkm")
+    assert gain.loc[125.0, "gain_vs_fixed4"] == pytest.approx(1 / 1.25 - 1)
+    assert gain.loc[225.0, "gain_vs_rows3"] == pytest.approx(1 / 0.95 - 1)
+    assert gain.loc[125.0, "all_stationary"] and not gain.loc[225.0, "all_stationary"]
+
+
+def test_analyse_writes_the_headline_report_and_figures(headline_dir):
+    a = an.analyse(headline_dir)
+    md = (a.out_dir / "headline.md").read_text()
+    for title in ("Road-limited capacity", "TUM LaneFreeDrive's ring",
+                  "Capacity loss with 5 % human drivers", "Lane-free gain at equal time gap",
+                  "Ring fundamental diagram"):
+        assert f"## {title}" in md
+    assert "| lane-free flocking CAVs, T = 0.6 s | 5 200 |" in md and "| 0 / 0 |" in md
+    assert "| 100 % | 12 100 |" in md and "| 15 504 |" in md
+    # every Markdown table row has as many cells as its header
+    for block in md.split("\n\n"):
+        rows = [r for r in block.splitlines() if r.startswith("|")]
+        if rows:
+            assert len({r.count("|") for r in rows}) == 1, block
+    for name in ("headline_capacity", "headline_mixed", "headline_fd", "headline_gain"):
+        p = a.out_dir / "figures" / f"{name}.png"
+        assert p.read_bytes()[:8] == PNG and f"({p.relative_to(a.out_dir)})" in md
+    assert "headline.md" in (a.out_dir / "report.md").read_text()
+    assert (a.out_dir / "discharge.csv").is_file()
+
+
+def _hollow(ax) -> int:
+    """Markers drawn hollow (face alpha 0) in the scatter collections of ``ax``."""
+    from matplotlib.collections import PathCollection
+
+    n = 0
+    for c in ax.collections:
+        if not isinstance(c, PathCollection):  # scatter markers only (not error bars)
+            continue
+        fc = c.get_facecolor()
+        if len(c.get_offsets()) and (len(fc) == 0 or np.allclose(fc[:, 3], 0.0)):
+            n += len(c.get_offsets())
+    return n
+
+
+def test_non_stationary_points_are_hollow_in_the_figures(headline_dir):
+    import matplotlib.pyplot as plt
+
+    from cosim.analysis import headline as hl
+
+    res = an.load_results(headline_dir)
+    fig = fg.headline_fd_figure(hl.ring_fd_runs(res), "headline")
+    assert _hollow(fig.axes[0]) == 1  # lane-free at 225 veh/km drifted 3 %
+    texts = [t.get_text() for t in fig.axes[0].get_legend().get_texts()]
+    assert texts[:3] == ["lane-free flocking", "4 fixed rows", "3 fixed rows (lanes)"]
+    assert any("not stationary" in t for t in texts)
+    tum = hl.tum_ring_table(res)
+    fig2 = fg.headline_mixed_figure(tum, res.ok[res.ok["part"] == "tum_ring"],
+                                    hl.TUM_RING_VPH, "headline")
+    assert _hollow(fig2.axes[0]) == 1
+    # the generic fundamental diagram too
+    runs = an.fd_runs(res)
+    fig3 = fg.fundamental_diagram_figure(runs[runs["arm"].str.startswith("tum_ring")],
+                                         ["arm"], "demand_level")
+    assert _hollow(fig3.axes[0]) == 1
+    plt.close("all")

@@ -357,7 +357,8 @@ network.circumference_m = 300.0
     res = pd.read_csv(out / "results.csv")
     bad = res[res["status"] == "failed"].iloc[0]
     assert bad["demand.ring_density_vpkm"] == 2000.0
-    assert "ring_density_vpkm" in bad["error"] and ("too high" in bad["error"] or "does not fit" in bad["error"])
+    assert "ring_density_vpkm" in bad["error"]
+    assert "too high" in bad["error"] or "does not fit" in bad["error"]
     assert (out / "runs" / bad["run_id"] / "error.txt").is_file()
 
 
@@ -688,3 +689,53 @@ def test_a_sweep_of_two_kinds_fills_each_kinds_parameter_column(tmp_path, sumo_e
         "formation_soft", "flock_formation_error_m"]
     # strong alignment keeps the ring's spacing; weak lets faster CAVs close in
     assert res.loc["vicsek_stiff", "min_gap_m"] > 1.5 * res.loc["vicsek_soft", "min_gap_m"]
+
+
+# --------------------------------------------------------------------------------------
+# The headline experiment (issue 13)
+# --------------------------------------------------------------------------------------
+
+
+def test_the_headline_sweep_is_fair_stationary_and_small_enough():
+    """`cosim sweep headline`: named PART/ARM#RUN runs; the SUMO-free road world only
+    without human drivers; ring runs stationary by design (>= 300 s warm-up, >= 600 s
+    measured); TUM's ring set-up; equal vehicles and desired speeds in every arm; the
+    three time gaps for the CAV arms; a smoke form of a few short runs."""
+    full = sw.load_sweep("headline")
+    smoke = sw.load_sweep("headline", smoke=True)
+    assert len(full.points) == 57 and len(smoke.points) == 4
+    parts = Counter(p.variant.split("/")[0] for p in full.points)
+    assert parts == {"bottleneck": 15, "tum_ring": 24, "ring_fd": 18}
+    for p in full.points + smoke.points:
+        sc, part = p.scenario, p.variant.split("/")[0]
+        assert "#" in p.variant
+        if sc.scenario.world == "road":
+            assert sc.demand.cav_share == 1.0, p.variant  # no human drivers
+        assert sc.demand.desired_speed_mps == (25.0, 35.0)
+        assert [c[:2] for c in sc.demand.size_classes] == [
+            (3.2, 1.6), (3.9, 1.7), (4.25, 1.8), (4.55, 1.82), (5.2, 1.88)]
+        if p in smoke.points:
+            assert sc.scenario.duration_s <= 90.0
+            continue
+        if part in ("tum_ring", "ring_fd"):
+            assert sc.network.kind == "ring" and sc.network.circumference_m == 1000.0
+            assert sc.scenario.warmup_s >= 300.0
+            assert sc.scenario.duration_s - sc.scenario.warmup_s >= 600.0
+        if part == "tum_ring":
+            assert sc.scenario.world == "sumo" and sc.network.width_m == 10.2
+            assert sc.demand.ring_density_vpkm == 225.0
+        if part == "bottleneck" and "lc2013" in p.variant:  # 3 -> 2 lanes at 600 m
+            assert sc.network.kind == "three_lane" and sc.demand.cav_share == 0.0
+            assert (sc.obstacle.s_m, sc.obstacle.d_m, sc.network.length_m) == (
+                600.0, -3.4, 900.0)
+        elif part == "bottleneck":
+            assert sc.scenario.world == "sumo" and sc.network.kind == "varying_width"
+            assert sc.network.width_profile == ((600.0, 10.2), (300.0, 6.8))
+    shares = Counter(p.scenario.demand.cav_share for p in full.points
+                     if p.variant.startswith("tum_ring"))
+    assert shares == {s: 3 for s in (0.0, 0.1, 0.2, 0.5, 0.9, 0.95, 0.99, 1.0)}
+    gaps = {(p.variant.split("#")[0], p.scenario.controller.law_params().time_gap_s)
+            for p in full.points if p.variant.startswith("ring_fd")}
+    assert {g for _, g in gaps} == {0.6, 0.8, 1.0}
+    modes = {p.scenario.controller.law_params().lateral_mode for p in full.points}
+    assert modes == {"free", "fixed"}

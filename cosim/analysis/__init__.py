@@ -5,6 +5,8 @@ Modules, by job:
 * :mod:`cosim.analysis.tables`: a sweep's results loaded and turned into tables
   (fundamental diagrams, capacity with t-based confidence intervals, safety, boundary,
   flock, failed runs);
+* :mod:`cosim.analysis.headline`: the headline experiment's tables (capacity per arm,
+  TUM's ring, the lane-free gain at equal time gap, the 5 %-HDV loss) and report;
 * :mod:`cosim.analysis.report`: :func:`analyse` writes every table (CSV and Markdown),
   ``report.md`` (with the grid that actually ran) and the figures;
 * :mod:`cosim.analysis.figures`: matplotlib figures in one style (imported on use: it
@@ -19,6 +21,7 @@ from cosim.analysis.tables import (
     boundary_table,
     capacity_table,
     demand_column,
+    discharge_table,
     failures_table,
     fd_intervals,
     fd_runs,
@@ -39,6 +42,7 @@ __all__ = [
     "capacity_table",
     "cmd_analyse",
     "demand_column",
+    "discharge_table",
     "failures_table",
     "fd_intervals",
     "fd_runs",

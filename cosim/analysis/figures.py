@@ -16,7 +16,7 @@
 * Headline (:mod:`cosim.analysis.headline`): :func:`plot_headline_capacity` (queue
   discharge per arm with confidence intervals), :func:`plot_headline_mixed` (flow on
   TUM's ring against the CAV share, beside TUM's), :func:`plot_headline_fd` (the ring
-  fundamental diagram per arm) and :func:`plot_headline_gain` (lane-free against fixed
+  fundamental diagram per time gap and mode) and :func:`plot_headline_gain` (lane-free against fixed
   rows at equal time gap).
 
 Points that are not stationary (flow drift of 2 % or more) are drawn hollow everywhere.
@@ -839,53 +839,64 @@ def plot_headline_mixed(tum: pd.DataFrame, runs: pd.DataFrame, out_path: str | P
     return _save(headline_mixed_figure(tum, runs, reference, title), out_path)
 
 
-def headline_fd_figure(runs: pd.DataFrame, title: str | None = None):
+#: Modes of the ring arms (cosim.analysis.headline) in a fixed style order.
+RING_MODES = (("lanefree", "lane-free flocking"), ("fixed4", "4 fixed rows"),
+              ("rows3", "3 fixed rows (lanes)"))
+
+
+def headline_fd_figure(runs: pd.DataFrame, title: str | None = None,
+                       reference: pd.DataFrame | None = None):
     """The figure of :func:`plot_headline_fd` (a matplotlib Figure, not saved)."""
-    fig, (ax_q, ax_v) = plt.subplots(1, 2, figsize=(12, 5))
-    arms = list(dict.fromkeys(runs["label"])) if len(runs) else []
-    for k, label in enumerate(arms):
-        g = runs[runs["label"] == label].sort_values("edie_density_vpkm")
-        st = series_style(k)
-        ok = stationary_mask(g)
-        curve = g.groupby("demand_level")[list(FD_COLUMNS)].mean().sort_values(
-            "edie_density_vpkm")
-        for ax, y in ((ax_q, "edie_flow_vph"), (ax_v, "space_mean_speed_mps")):
-            ax.plot(np.r_[0.0, curve["edie_density_vpkm"]] if y == "edie_flow_vph"
-                    else curve["edie_density_vpkm"],
-                    np.r_[0.0, curve[y]] if y == "edie_flow_vph" else curve[y],
-                    color=st["color"], linestyle=st["linestyle"], linewidth=1.2,
-                    label=label if ax is ax_q else None)
-            ax.scatter(g.loc[ok, "edie_density_vpkm"], g.loc[ok, y], color=st["color"],
-                       marker=st["marker"], s=30, zorder=3)
-            ax.scatter(g.loc[~ok, "edie_density_vpkm"], g.loc[~ok, y], facecolors="none",
-                       edgecolors=st["color"], marker=st["marker"], s=34, linewidths=1.2,
-                       zorder=3)
-    ax_q.set_xlabel("density (Edie), veh/km")
-    ax_q.set_ylabel("flow (Edie), veh/h")
-    ax_v.set_xlabel("density (Edie), veh/km")
-    ax_v.set_ylabel("space-mean speed, m/s")
-    for ax, y in ((ax_q, "edie_flow_vph"), (ax_v, "space_mean_speed_mps")):
+    gaps = sorted(runs["time_gap_s"].dropna().unique()) if len(runs) else []
+    fig, axes = plt.subplots(1, max(len(gaps), 1), figsize=(5 * max(len(gaps), 1), 4.4),
+                             squeeze=False, sharey=True)
+    for ax, tg in zip(axes[0], gaps, strict=False):
+        for k, (mode, name) in enumerate(RING_MODES):
+            g = runs[(runs["time_gap_s"] == tg) & (runs["mode"] == mode)]
+            if g.empty:
+                continue
+            st = series_style(k)
+            ok = stationary_mask(g)
+            curve = g.groupby("demand_level")[["edie_density_vpkm", "edie_flow_vph"]].mean(
+            ).sort_values("edie_density_vpkm")
+            ax.plot(np.r_[0.0, curve["edie_density_vpkm"]], np.r_[0.0, curve["edie_flow_vph"]],
+                    color=st["color"], linestyle=st["linestyle"], linewidth=1.2, label=name)
+            ax.scatter(g.loc[ok, "edie_density_vpkm"], g.loc[ok, "edie_flow_vph"],
+                       color=st["color"], marker=st["marker"], s=34, zorder=3)
+            ax.scatter(g.loc[~ok, "edie_density_vpkm"], g.loc[~ok, "edie_flow_vph"],
+                       facecolors="none", edgecolors=st["color"], marker=st["marker"], s=38,
+                       linewidths=1.2, zorder=3)
+        if reference is not None and len(reference) and tg == gaps[0]:
+            ax.scatter(reference["edie_density_vpkm"], reference["edie_flow_vph"], color="k",
+                       marker="x", s=40, zorder=4,
+                       label="lane-free, SUMO world (TUM ring runs)")
+        ax.set_title(f"time gap T = {tg:g} s", fontsize=9)
+        ax.set_xlabel("density (Edie), veh/km")
         ax.grid(alpha=0.3)
         ax.set_xlim(0, _top([runs], "edie_density_vpkm"))
-        ax.set_ylim(0, _top([runs], y))
-    handles, _ = ax_q.get_legend_handles_labels()
-    ax_q.legend(handles=[*handles, REJECTED_HANDLE()], fontsize=7, loc="upper left")
-    fig.suptitle(_title("Ring fundamental diagram (stationary runs filled)", title))
+    axes[0, 0].set_ylabel("flow (Edie), veh/h")
+    axes[0, 0].set_ylim(0, _top([runs] + ([reference] if reference is not None else []),
+                                "edie_flow_vph"))
+    handles, _ = axes[0, 0].get_legend_handles_labels()
+    axes[0, 0].legend(handles=[*handles, REJECTED_HANDLE()], fontsize=7, loc="upper left")
+    fig.suptitle(_title("Ring fundamental diagram, 100 % CAVs", title))
     fig.tight_layout()
     return fig
 
 
-def plot_headline_fd(runs: pd.DataFrame, out_path: str | Path, title: str | None = None
-                     ) -> Path:
-    """Flow- and speed-density of the ring arms: every run (hollow when not stationary)
-    and the arm's line through its density means from the origin; the PNG path.
+def plot_headline_fd(runs: pd.DataFrame, out_path: str | Path, title: str | None = None,
+                     reference: pd.DataFrame | None = None) -> Path:
+    """Flow-density of the ring arms, one panel per time gap, one colour per mode (lane-free,
+    4 fixed rows, 3 fixed rows): every run (hollow when not stationary) and the mode's line
+    through its density means from the origin; the PNG path.
 
     Args:
-        runs: run rows with ``label`` (the arm's name), ``demand_level``,
-            ``edie_density_vpkm``, ``edie_flow_vph``, ``space_mean_speed_mps``,
-            ``stationary``.
+        runs: run rows with ``mode``, ``time_gap_s``, ``demand_level``,
+            ``edie_density_vpkm``, ``edie_flow_vph``, ``stationary``.
+        reference: runs drawn as black crosses in the first panel (e.g. the lane-free
+            CAVs of TUM's ring in the SUMO world).
     """
-    return _save(headline_fd_figure(runs, title), out_path)
+    return _save(headline_fd_figure(runs, title, reference), out_path)
 
 
 def headline_gain_figure(gain: pd.DataFrame, title: str | None = None):
@@ -893,8 +904,7 @@ def headline_gain_figure(gain: pd.DataFrame, title: str | None = None):
     levels = sorted(gain["ring_density_vpkm"].unique()) if len(gain) else []
     fig, axes = plt.subplots(1, max(len(levels), 1), figsize=(5.5 * max(len(levels), 1), 4.2),
                              squeeze=False, sharey=True)
-    names = (("lanefree_vph", "lane-free"), ("fixed4_vph", "4 fixed rows"),
-             ("rows3_vph", "3 fixed rows (lanes)"))
+    names = tuple((f"{mode}_vph", name) for mode, name in RING_MODES)
     for ax, k in zip(axes[0], levels, strict=False):
         g = gain[gain["ring_density_vpkm"] == k].sort_values("time_gap_s")
         for j, (col, name) in enumerate(names):

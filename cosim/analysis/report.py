@@ -3,7 +3,9 @@
 ``analyse(RESULTS_DIR)`` writes to ``RESULTS_DIR/analysis/``: ``<table>.csv`` and
 ``<table>.md`` for every table of :mod:`cosim.analysis.tables`, ``report.md`` (the sweep,
 the grid that actually ran, e.g. a smoke grid, and the tables) and PNG figures in
-``figures/`` (:mod:`cosim.analysis.figures`).
+``figures/`` (:mod:`cosim.analysis.figures`). For the headline experiment (variants named
+``PART/ARM#RUN``, :mod:`cosim.analysis.headline`) also ``headline.md`` (the README's
+tables), ``headline_*.csv`` and the ``figures/headline_*.png``.
 """
 
 from __future__ import annotations
@@ -15,16 +17,19 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from cosim.analysis import headline as hl
 from cosim.analysis.tables import (
     SweepResults,
     boundary_table,
     capacity_table,
+    discharge_table,
     failures_table,
     fd_intervals,
     fd_runs,
     fd_summary,
     flock_table,
     load_results,
+    pd_numeric,
     safety_table,
 )
 from cosim.errors import ConfigError
@@ -70,7 +75,8 @@ class Analysis:
 
 
 TABLE_TITLES = {
-    "capacity": "Capacity (maximum sustained flow)",
+    "capacity": "Capacity (maximum sustained flow; entrance-limited maxima are lower bounds)",
+    "discharge": "Road-limited capacity (queue discharge at an active bottleneck)",
     "fd_summary": "Fundamental diagram (mean over seeds)",
     "safety": "Safety",
     "boundary": "Boundary violations",
@@ -110,6 +116,7 @@ def analyse(
         "fd_intervals": fd_intervals(res),
         "fd_summary": fd_summary(res, confidence),
         "capacity": capacity_table(res, confidence),
+        "discharge": discharge_table(res, confidence),
         "safety": safety_table(res),
         "boundary": boundary_table(res),
         "flock": flock_table(res),
@@ -129,6 +136,8 @@ def analyse(
     if figures:
         fig_files = _figures(res, tables, out / "figures", runs, max_run_figures, times)
         files += fig_files
+    if hl.is_headline(res):
+        files += _headline(res, tables, out, confidence, figures)
     report = out / "report.md"
     report.write_text(_report(res, tables, confidence, fig_files, out))
     files.append(report)
@@ -162,6 +171,47 @@ def _figures(res, tables, fig_dir: Path, runs, max_run_figures, times) -> list[P
     return made
 
 
+def _headline(res: SweepResults, tables: dict, out: Path, confidence: float,
+              figures: bool) -> list[Path]:
+    """The headline tables (CSV, into ``tables``), ``headline.md`` and its figures."""
+    from cosim.analysis import figures as fg
+
+    head = hl.headline_tables(res, confidence)
+    tables.update(head)
+    files = []
+    for name, df in head.items():
+        p = out / f"{name}.csv"
+        df.to_csv(p, index=False)
+        files.append(p)
+    figs: list[Path] = []
+    if figures:
+        fig_dir = out / "figures"
+        fig_dir.mkdir(parents=True, exist_ok=True)
+        name = res.plan.get("name") or res.root.name
+        if not head["headline_bottleneck"].empty:
+            figs.append(fg.plot_headline_capacity(head["headline_bottleneck"],
+                                                  fig_dir / "headline_capacity.png", name))
+        ok = res.ok
+        if not head["headline_tum_ring"].empty:
+            ring = ok[ok["part"] == "tum_ring"]
+            figs.append(fg.plot_headline_mixed(head["headline_tum_ring"], ring,
+                                               fig_dir / "headline_mixed.png",
+                                               hl.TUM_RING_VPH, name))
+        fd_runs_ = hl.ring_fd_runs(res)
+        if len(fd_runs_):
+            ring = ok[(ok["part"] == "tum_ring")]
+            ref = ring[pd_numeric(ring, "demand.cav_share") == 1.0]
+            figs.append(fg.plot_headline_fd(fd_runs_, fig_dir / "headline_fd.png", name, ref))
+        if not head["headline_lanefree_gain"].empty:
+            figs.append(fg.plot_headline_gain(head["headline_lanefree_gain"],
+                                              fig_dir / "headline_gain.png", name))
+    md = out / "headline.md"
+    md.write_text(hl.headline_markdown(head, confidence,
+                                       [p.relative_to(out).as_posix() for p in figs],
+                                       res.plan.get("name") or res.root.name))
+    return files + figs + [md]
+
+
 def _report(res: SweepResults, tables, confidence, fig_files, out: Path) -> str:
     plan = res.plan
     n_ok, n_all = len(res.ok), len(res.table)
@@ -190,8 +240,11 @@ def _report(res: SweepResults, tables, confidence, fig_files, out: Path) -> str:
             lines.append(f"- {col.replace('_', ' ')}: {vals}")
     lines.append("")
     lines += grid_lines(plan, res.table)
-    for name in ("capacity", "fd_summary", "safety", "boundary", "flock", "failed"):
-        if name == "failed" and tables[name].empty:
+    if "headline_bottleneck" in tables:
+        lines += ["The headline tables and figures: [headline.md](headline.md).", ""]
+    for name in ("capacity", "discharge", "fd_summary", "safety", "boundary", "flock",
+                 "failed"):
+        if name in ("failed", "discharge") and tables[name].empty:
             continue
         lines += [f"## {TABLE_TITLES[name]}", "", markdown_table(tables[name])]
     if fig_files:

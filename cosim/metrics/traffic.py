@@ -32,6 +32,11 @@ Definitions (units in names):
   what its drivers want (0: everybody at the desired speed).
 * **Boundary violations**: vehicle-steps with any part of the body outside
   the road edges, distinct vehicles, worst excursion (m).
+* **Flow drift** (``flow_drift``): the relative difference of the mean Edie flow of the
+  second and the first half of the measured intervals (the middle one left out when
+  their number is odd), ``(q2 - q1) / ((q1 + q2) / 2)``; ``stationary`` when
+  ``|flow_drift| < 2 %`` (:mod:`cosim.metrics.capacity` says why this form). NaN and not
+  stationary with fewer than two intervals.
 * **Collisions**: SUMO's own list (``simulation.getCollisions``) and a
   geometric rectangle-overlap check; a collision event is a pair that starts
   to overlap; split into CAV-involved and HDV-only.
@@ -45,6 +50,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from controllers.neighbours import tree_points
+from cosim.metrics.capacity import interval_drift, is_stationary
 
 
 @dataclass
@@ -388,6 +394,7 @@ class TrafficRecorder:
             vals = [r[key] for r in rows]
             return float(np.nanmean(vals)) if vals else np.nan
 
+        drift = interval_drift([r["edie_flow_vph"] for r in rows])
         total_k = float(np.nansum([r["edie_density_vpkm"] for r in rows])) if rows else 0.0
         total_q = float(np.nansum([r["edie_flow_vph"] for r in rows])) if rows else 0.0
         out = {
@@ -425,6 +432,8 @@ class TrafficRecorder:
             "hdv_speed_shortfall_mps": (self._shortfall["hdv"][0] / self._shortfall["hdv"][1]
                                         if self._shortfall["hdv"][1] else np.nan),
             "n_intervals": len(rows),
+            "flow_drift": drift,
+            "stationary": is_stationary(drift),
         }
         for x in self.xs:
             out[f"flow_x{x:g}_vph"] = mean(f"flow_x{x:g}_vph")

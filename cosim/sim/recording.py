@@ -1,4 +1,5 @@
-"""Recorders that attach to the loop's ``record`` phase: traffic, jams, flock, trajectories.
+"""Recorders that attach to the loop's ``record`` phase: traffic, jams, capacity, flock,
+trajectories.
 
 Each reads the :class:`~cosim.sim.world.RoadSnapshot` of the step (the state after it)
 and keeps what it measures; :func:`attach_recorders` wires them all for a run and
@@ -13,12 +14,17 @@ import numpy as np
 import pandas as pd
 
 from controllers import protocol
+from cosim.metrics import capacity as cap
 from cosim.metrics.flock import flock_metrics
 from cosim.metrics.jams import JamRecorder
 from cosim.metrics.traffic import StepState, TrafficRecorder
 from cosim.sim.loop import Loop, StepData
 
 FLOCK_SAMPLE_S = 1.0  # s between flock-metric samples
+#: |acceleration| above this is harsh (comfort column), m/s^2.
+HARSH_ACCEL_MPS2 = 3.0
+#: How often the capacity recorder asks the world for its pending insertions, s.
+PENDING_SAMPLE_S = 1.0
 
 
 def step_state(st: StepData, road) -> StepState:
@@ -40,6 +46,7 @@ class Recorders:
 
     traffic: TrafficRecorder
     jams: JamRecorder
+    capacity: CapacityRecorder | None = None
     flock_rows: list[dict] = field(default_factory=list)
     trajectories: list[pd.DataFrame] = field(default_factory=list)
     departed: set = field(default_factory=set)
@@ -55,9 +62,10 @@ class Recorders:
 
 def attach_recorders(loop: Loop, traffic: TrafficRecorder, jams: JamRecorder, *,
                      warmup_s: float, trajectories_every: int = 0,
-                     flock_sample_s: float = FLOCK_SAMPLE_S) -> Recorders:
+                     flock_sample_s: float = FLOCK_SAMPLE_S,
+                     capacity: CapacityRecorder | None = None) -> Recorders:
     """Hook the recorders into ``loop``'s ``record`` phase; returns them."""
-    rec = Recorders(traffic, jams)
+    rec = Recorders(traffic, jams, capacity)
     world = loop.world
     sample_every = max(1, int(round(flock_sample_s / loop.dt)))
     lattice = protocol.lattice(loop.law) if loop.law is not None else None
@@ -68,6 +76,9 @@ def attach_recorders(loop: Loop, traffic: TrafficRecorder, jams: JamRecorder, *,
         ss = step_state(st, world.road)
         traffic.record(ss, world.collisions())
         jams.record(st.t, ss.ids, ss.s_front, ss.v, ss.is_static)
+        if capacity is not None:
+            new = [v for v in world.departed_now if v != loop.obstacle_id]
+            capacity.record(ss, world.pending, len(new))
         if st.k % sample_every == 0 and st.t > warmup_s:
             _flock_sample(rec, ss, st.t, lattice, loop.law, world.period)
         if trajectories_every and st.k % trajectories_every == 0:
@@ -98,3 +109,146 @@ def _flock_sample(rec: Recorders, ss: StepState, t: float, lattice, law, period)
     if law is not None:
         row.update(protocol.extra_metrics(law))
     rec.flock_rows.append(row)
+
+
+class CapacityRecorder:
+    """Bins of zone sums, crossing times, pending insertions, harsh accelerations and CAV
+    distance: the data of :mod:`cosim.metrics.capacity` and of the comfort columns.
+
+    Per step (state after it, at ``t``; the step covers ``(t - dt, t]`` and counts in the
+    bin of its middle):
+
+    * each zone of ``layout`` (entrance, upstream, downstream): time spent (s), distance
+      travelled (m) and distance at the desired speeds (m, vehicles with a known desired
+      speed) of the traffic in it (obstacles excluded);
+    * each count cross-section: the time (linearly interpolated within the step, s) at
+      which a vehicle's front passed it;
+    * every :data:`PENDING_SAMPLE_S`: ``pending()``, the vehicles waiting to be inserted
+      (the bin keeps the most), and in every step the vehicles inserted (the bin keeps
+      the running total), for the backlog against ``demand_vph``;
+    * after the warm-up, per CAV- and HDV-step: whether ``|dv/dt| > HARSH_ACCEL_MPS2``
+      (speed change over the step of a vehicle present in both steps);
+    * over the whole run: the distance driven by CAVs (km), the base of the safety layer's
+      activations per vehicle-km (the safety layer counts over the whole run too).
+
+    Per-step cost: one dictionary look-up per vehicle and a few vectorised masks.
+
+    Args:
+        dt: step, s. layout: zones and cross-sections. warmup_s: start of the measured
+        period, s. duration_s: length of the run, s. bin_s: bin length, s.
+        demand_vph: the demand's mean arrival rate on open roads (main and ramp), veh/h.
+    """
+
+    def __init__(self, dt: float, layout: cap.Layout, warmup_s: float, duration_s: float,
+                 bin_s: float = cap.BIN_S, demand_vph: float = 0.0) -> None:
+        self.dt = float(dt)
+        self.layout = layout
+        self.warmup_s = float(warmup_s)
+        self.duration_s = float(duration_s)
+        self.bin_s = float(bin_s)
+        n_bins = int(np.ceil(duration_s / bin_s)) + 1
+        self.zones = layout.zones
+        self._sums = {name: np.zeros((3, n_bins)) for name in self.zones}  # tts, ttd, tdd
+        self.pending = np.zeros(n_bins)
+        self.inserted = np.zeros(n_bins)
+        self.demand_vph = float(demand_vph)
+        self._n_inserted = 0
+        self.xs = np.asarray(layout.sections_m, dtype=float)
+        self._crossings: list[list[float]] = [[] for _ in self.xs]
+        self._pending_every = max(1, int(round(PENDING_SAMPLE_S / dt)))
+        self._k = 0
+        self._prev_index: dict = {}
+        self._prev_front = np.zeros(0)
+        self._prev_v = np.zeros(0)
+        self.harsh = {"cav": [0, 0], "hdv": [0, 0]}  # harsh steps, steps
+        self.cav_distance_m = 0.0
+        self.t_end_s = 0.0
+
+    def record(self, ss: StepState, pending=None, n_departed: int = 0) -> None:
+        """Add one step; ``pending()`` returns the vehicles waiting to be inserted,
+        ``n_departed`` the vehicles inserted in this step."""
+        t = ss.t
+        self.t_end_s = t
+        b = min(int((t - 0.5 * self.dt) // self.bin_s), self.pending.shape[0] - 1)
+        self._n_inserted += int(n_departed)
+        self.inserted[b] = self._n_inserted
+        static = np.zeros(len(ss.s), dtype=bool) if ss.is_static is None else ss.is_static
+        traffic = ~static
+        desired = (np.full(len(ss.s), np.nan) if ss.desired is None
+                   else np.asarray(ss.desired, dtype=float))
+        known = np.isfinite(desired)
+        for name, (z0, z1) in self.zones.items():
+            m = traffic & (ss.s >= z0) & (ss.s < z1)
+            if m.any():
+                sums = self._sums[name]
+                mk = m & known
+                sums[0, b] += self.dt * int(np.count_nonzero(m))
+                sums[1, b] += self.dt * float(np.sum(ss.v[mk]))
+                sums[2, b] += self.dt * float(np.sum(desired[mk]))
+        if pending is not None and self._k % self._pending_every == 0:
+            self.pending[b] = max(self.pending[b], float(pending()))
+        self._k += 1
+
+        idx = np.fromiter((self._prev_index.get(i, -1) for i in ss.ids), dtype=np.int64,
+                          count=len(ss.ids))
+        seen = idx >= 0
+        if len(self.xs) and seen.any():
+            prv = self._prev_front[idx[seen]]
+            cur = ss.s_front[seen]
+            for k, x in enumerate(self.xs):
+                hit = (prv < x) & (cur >= x)
+                if hit.any():
+                    frac = (x - prv[hit]) / np.maximum(cur[hit] - prv[hit], 1e-9)
+                    self._crossings[k].extend((t - self.dt + frac * self.dt).tolist())
+        if t > self.warmup_s + 1e-9 and seen.any():
+            acc = (ss.v[seen] - self._prev_v[idx[seen]]) / self.dt
+            harsh = np.abs(acc) > HARSH_ACCEL_MPS2
+            is_cav = ss.is_cav[seen]
+            moving = traffic[seen]
+            for kind, mask in (("cav", is_cav & moving), ("hdv", ~is_cav & moving)):
+                self.harsh[kind][0] += int(np.count_nonzero(harsh & mask))
+                self.harsh[kind][1] += int(np.count_nonzero(mask))
+        cav = ss.is_cav & traffic
+        self.cav_distance_m += self.dt * float(np.sum(ss.v[cav]))
+        self._prev_index = {vid: k for k, vid in enumerate(ss.ids)}
+        self._prev_front = np.asarray(ss.s_front, dtype=float)
+        self._prev_v = np.asarray(ss.v, dtype=float)
+
+    def data(self) -> cap.CapacityData:
+        """The recorded data for :func:`cosim.metrics.capacity.assess`."""
+        return cap.CapacityData(
+            bin_s=self.bin_s, warmup_s=self.warmup_s, t_end_s=self.t_end_s,
+            zone_tts_s={n: s[0].copy() for n, s in self._sums.items()},
+            zone_ttd_m={n: s[1].copy() for n, s in self._sums.items()},
+            zone_tdd_m={n: s[2].copy() for n, s in self._sums.items()},
+            pending=self.pending.copy(),
+            inserted=self.inserted.copy(), demand_vph=self.demand_vph,
+            crossings=[np.sort(np.asarray(c, dtype=float)) for c in self._crossings],
+        )
+
+    def comfort(self) -> dict:
+        """``harsh_accel_share_cav`` / ``_hdv`` (share of CAV- / HDV-steps after the warm-up
+        with ``|a| > HARSH_ACCEL_MPS2``; NaN without such steps) and ``cav_vehicle_km``."""
+        out = {}
+        for kind in ("cav", "hdv"):
+            n_harsh, n = self.harsh[kind]
+            out[f"harsh_accel_share_{kind}"] = n_harsh / n if n else float("nan")
+        out["cav_vehicle_km"] = self.cav_distance_m / 1000.0
+        return out
+
+    def series(self) -> dict:
+        """Compact per-bin series for meta.json (figures: N-curves, speed ratios)."""
+        n = int(np.ceil(self.t_end_s / self.bin_s - 1e-9))
+        out: dict = {"bin_s": self.bin_s, "zones_m": {k: list(v) for k, v in self.zones.items()},
+                     "sections_m": self.xs.tolist(),
+                     "pending": self.pending[:n].astype(int).tolist(),
+                     "inserted": self.inserted[:n].astype(int).tolist(),
+                     "demand_vph": self.demand_vph}
+        for name, sums in self._sums.items():
+            ratio = cap.speed_ratio(sums[1, :n], sums[2, :n])
+            out[f"{name}_speed_ratio"] = [None if not np.isfinite(r) else round(float(r), 4)
+                                          for r in ratio]
+        edges = np.arange(n + 1) * self.bin_s
+        out["section_counts"] = [np.histogram(c, bins=edges)[0].tolist() if len(edges) > 1
+                                 else [] for c in self._crossings]
+        return out

@@ -24,10 +24,11 @@ from controllers.safety import SafetyConfig, SafetyLayer
 from cosim.config.checks import check_against_network
 from cosim.config.scenario import Scenario
 from cosim.errors import ConfigError, CosimError, SumoStartError
+from cosim.metrics import capacity as cap
 from cosim.metrics.jams import JamRecorder
 from cosim.metrics.traffic import TrafficRecorder
 from cosim.sim.loop import Loop
-from cosim.sim.recording import attach_recorders
+from cosim.sim.recording import CapacityRecorder, attach_recorders
 from cosim.sim.results import RunResult, versions
 
 #: A cross-section this far (m) past a stopped obstacle's front measures the flow past it.
@@ -65,6 +66,18 @@ def measurement_layout(sc: Scenario, length: float, periodic: bool):
                 f"outputs.cross_sections_m: {x} m is outside the road [0, {length:.1f}] m"
             )
     return zone, tuple(xs)
+
+
+def capacity_layout(sc: Scenario, road, net) -> cap.Layout:
+    """Zones and count cross-sections of the capacity measurement
+    (:mod:`cosim.metrics.capacity`): the bottleneck from the obstacle, the road's width
+    profile (``road``: a RoadProfile) or an on-ramp merge with ramp demand."""
+    ob = sc.obstacle
+    obstacle = (ob.s_m, ob.length_m) if ob.present else None
+    merge = getattr(net, "merge_s_m", None) if sc.demand.ramp_inflow_vph > 0 else None
+    widths = np.asarray(road.left, dtype=float) - np.asarray(road.right, dtype=float)
+    bottleneck = cap.find_bottleneck(road.s0, widths, obstacle, merge)
+    return cap.layout_for(float(net.length_m), bool(net.periodic), bottleneck)
 
 
 def run_scenario(sc: Scenario, out_dir: str | Path | None = None, gui: bool = False,
@@ -172,8 +185,14 @@ def _run_in(sc: Scenario, work: Path, gui: bool, progress, hooks) -> RunResult:
                               sc.outputs.ttc_threshold_s)
     jams = JamRecorder(run.step_length_s, run.warmup_s, xs, period,
                        sc.outputs.standstill_speed_mps, sc.outputs.long_standstill_s)
+    layout = capacity_layout(sc, world.road, net)
+    ramp = sc.demand.ramp_inflow_vph if getattr(net, "ramp_route", None) else 0.0
+    demand = 0.0 if net.periodic else sc.demand.inflow_vph + ramp
+    caprec = CapacityRecorder(run.step_length_s, layout, run.warmup_s, run.duration_s,
+                              demand_vph=demand)
     every = sc.outputs.trajectory_every if sc.outputs.trajectories else 0
-    rec = attach_recorders(loop, traffic, jams, warmup_s=run.warmup_s, trajectories_every=every)
+    rec = attach_recorders(loop, traffic, jams, warmup_s=run.warmup_s, trajectories_every=every,
+                           capacity=caprec)
     if hooks is not None:
         hooks(loop)
     n_steps = run.n_steps
@@ -213,7 +232,14 @@ def _run_in(sc: Scenario, work: Path, gui: bool, progress, hooks) -> RunResult:
             summary[key] = None
     from controllers.safety import SafetyCounts
 
-    summary.update((safety.counts if safety is not None else SafetyCounts()).as_dict())
+    counts = safety.counts if safety is not None else SafetyCounts()
+    summary.update(counts.as_dict())
+    summary.update(cap.assess(caprec.data(), layout))
+    summary.update(caprec.comfort())
+    cav_km = summary["cav_vehicle_km"]
+    # safety-layer activations (edge, side and speed rules, agent-steps) per CAV-km driven
+    summary["safety_activations_per_cav_km"] = (
+        (counts.edge + counts.side + counts.speed) / cav_km if cav_km > 0 else np.nan)
     for name, rate in protocol.clip_stats(law).items():
         summary[f"clip_rate_{name}"] = rate
     for layer in loop.layers:
@@ -237,6 +263,8 @@ def _run_in(sc: Scenario, work: Path, gui: bool, progress, hooks) -> RunResult:
         "demand": {"vehicles": n_planned, "arrival_process": plan.process,
                    "n_cav": sum(v.is_cav for v in plan.vehicles)},
         "measurement": {"zone_m": zone, "cross_sections_m": xs},
+        "capacity": {"bottleneck": layout.bottleneck.detail if layout.bottleneck else "",
+                     "note": layout.note, **caprec.series()},
         "wall_time_s": time.perf_counter() - t_wall,
     }
     if detectors is not None:
