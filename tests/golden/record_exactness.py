@@ -27,7 +27,9 @@ runs, ``--parts law`` for the law and safety replays) on the current tree, in a 
 its own that says why; never to make a speed-up pass. History: recorded on the numpy code
 before issue 15's speed-ups (the numba kernels matched it bit for bit); runs recorded again
 for the prefix-stable demand and calibrated human drivers, and for the zipper and
-held-driver rules of the lane-free law and the safety layer's in-band rule.
+held-driver rules of the lane-free law and the safety layer's in-band rule; everything
+recorded again for the lane-free law's congestion rules (hysteresis, announced moves and
+rows in dense traffic).
 """
 
 from __future__ import annotations

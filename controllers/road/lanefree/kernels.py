@@ -30,13 +30,14 @@ NAMES = (
     "lookahead_min_m", "scan_margin_m", "scan_time_gap_s", "move_cost", "clear_gain",
     "clear_cap_m", "nudge_gain", "order_gain", "urgent_gain_mps", "queue_speed_mps",
     "bias_speed_low_mps", "coop_time_gap_s", "yield_decel_mps2", "comfort_decel_mps2",
+    "congested_hysteresis_mps",
     # derived (folded as the numpy code folded them)
     "bias_span", "app_bt2", "app_mbt", "app_2b", "scan_2b", "lat_2a", "two_lc",
     "zipper_gap", "long_min", "long_max", "lat_speed_max", "em_bt2", "em_mbt", "em_2b",
     "shift_cav", "dt",
 )
 (TG, TGH, S0, KP, KD, KFF, KPH, KDH, KV, KA, EMIN, EMAX, ANT, FM, KY, CY, LC, EM, SB, SBV,
- SBT, CIM, CIG, RG, LAS, LAM, SCM, SCT, MC, CG, CC, NG, OG, UG, QS, BL, CT, YD, CB, BSPAN,
+ SBT, CIM, CIG, RG, LAS, LAM, SCM, SCT, MC, CG, CC, NG, OG, UG, QS, BL, CT, YD, CB, CH, BSPAN,
  ABT2, AMBT, A2B, SC2B, L2A, TWOLC, ZG, LMIN, LMAX, VMAX, EBT2, EMBT, E2B, SHC, DT) = range(
     len(NAMES))
 
@@ -328,7 +329,10 @@ def plan(P, rows, frac, lo, hi, current, j, ds, s, d, v, length, width, is_cav, 
         gain[r] = gn
         outside = (d_i < lo_r - 0.05) or (d_i > hi_r + 0.05)
         nd = (blocked[k_here] or outside) and gn > 0 and not blocked[k_best]
-        nd = nd or ((offer[k_best] - offer[k_here] > max(P[UG], 0.3 * v_i))
+        # a move that pays in speed is announced (others yield) only if it pays more in
+        # dense traffic, where every announced move makes two bands brake
+        jam = min(max((0.95 - v_i / max(vd, 0.1)) / 0.2, 0.0), 1.0)
+        nd = nd or ((offer[k_best] - offer[k_here] > max(P[UG], 0.3 * v_i) + P[CH] * jam)
                     and v_i > P[QS] and gn > 0)
         need[r] = nd
     return best, gain, need
@@ -495,11 +499,68 @@ def linspace01(num):
     return out
 
 
+#: A congested CAV's target within this of a row is not pulled to it, m.
+ROW_SLACK_M = 0.5
+
+
+@njit(cache=True)
+def _pull_to_rows(P, target, urgent, s, d, v, v_des, length, width, lo, hi, n, static_idx,
+                  periodic, period, row_pull):
+    """Rows in dense traffic (in place on ``target`` (N,) m): as a CAV's speed falls from
+    95 % to 75 % of its desired speed, its lateral target is pulled, by up to ``row_pull``
+    (0..1) of the way, to the nearest of the rows that fit across the road ahead: as many
+    as the widest vehicle present plus ``clearance`` (m) fit between the edges, spread
+    evenly (the rows come from the vehicles' widths and the road, not from slots). A CAV
+    whose move is announced (leaving a blocked band) is not pulled, nor one with a stopped
+    obstacle ahead within the look-ahead (the free part of the road is no whole number of
+    rows: the planner's offers and the zipper arrange the merge)."""
+    if n == 0:
+        return
+    w_max = 0.0
+    for i in range(width.shape[0]):
+        w_max = max(w_max, width[i])
+    pitch = w_max + P[LC]
+    for i in range(n):
+        if urgent[i] or np.isnan(target[i]):
+            continue
+        ratio = v[i] / max(v_des[i], 0.1)
+        congested = min(max((0.95 - ratio) / 0.2, 0.0), 1.0)
+        if congested <= 0.0:
+            continue
+        # centres of the widest vehicle that fit inside the road ahead
+        half_extra = 0.5 * (w_max - width[i])
+        lo_w = lo[i] + half_extra
+        hi_w = hi[i] - half_extra
+        if hi_w <= lo_w:
+            continue
+        n_rows = int(math.floor((hi_w - lo_w) / pitch)) + 1
+        if n_rows < 2:
+            nearest = 0.5 * (lo_w + hi_w)
+        else:
+            step = (hi_w - lo_w) / (n_rows - 1)
+            k = min(max(round((target[i] - lo_w) / step), 0), n_rows - 1)
+            nearest = lo_w + k * step
+        look = max(P[LAM], v[i] * P[LAS])
+        free_row = True
+        for q in range(static_idx.shape[0]):
+            kk = static_idx[q]
+            ds_k = s[kk] - s[i]
+            if periodic:
+                ds_k = np.mod(ds_k, period)
+            if ds_k > 0 and ds_k - 0.5 * (length[i] + length[kk]) < look:
+                free_row = False  # merging past an obstacle: no rows (they would
+                # hold the free part to whole rows)
+        # a CAV about in a row stays where it is (moving a whole ordered flock by a few
+        # decimetres costs more than it gives); one between two rows is pulled
+        if free_row and abs(nearest - target[i]) > ROW_SLACK_M:
+            target[i] += row_pull * congested * (nearest - target[i])
+
+
 @njit(cache=True)
 def law_step(P, s, d, v, v_lat, length, width, accel, is_cav, n, order, k_side, periodic,
              period, target0, urgent0, due0, fixed, edges_ahead, loop_edges, has_loop_edges,
              v_des, static_idx, held, candidate_step_m, hysteresis_mps, queue_hysteresis,
-             lat_max, reach_lead):
+             congested_hysteresis, row_pull, lat_max, reach_lead):
     """The law's step after its inputs (see the law's ``compute``): the road edges of the
     target's look-ahead (``edges_ahead``, never wider than ``loop_edges``), the neighbour
     window, the lateral targets of the CAVs whose turn it is (``due0``), the primary
@@ -562,8 +623,14 @@ def law_step(P, s, d, v, v_lat, length, width, accel, is_cav, n, order, k_side, 
                                 periodic, period)
         for r in range(n_due):
             i = rows[r]
-            # in a slow queue lateral moves do not pay: the bar rises as the speed falls
-            bar = hysteresis_mps + queue_hysteresis * max(P[QS] - v[i], 0.0)
+            # in dense traffic lateral moves do not pay (each one makes the followers in
+            # both bands brake): the bar rises from hysteresis_mps at 95 % of the desired
+            # speed to hysteresis_mps + congested_hysteresis at 75 %, and further in a
+            # slow queue
+            ratio = v[i] / max(v_des[i], 0.1)
+            congested = min(max((0.95 - ratio) / 0.2, 0.0), 1.0)
+            bar = (hysteresis_mps + congested_hysteresis * congested
+                   + queue_hysteresis * max(P[QS] - v[i], 0.0))
             was_nan = np.isnan(target[i])
             changed = was_nan or gain[r] > bar or need[r]
             if changed:
@@ -571,6 +638,9 @@ def law_step(P, s, d, v, v_lat, length, width, accel, is_cav, n, order, k_side, 
                     n_changes += 1
                 target[i] = best[r]
                 urgent[i] = need[r]
+    if not fixed and row_pull > 0:
+        _pull_to_rows(P, target, urgent, s, d, v, v_des, length, width, lo, hi, n,
+                      static_idx, periodic, period, row_pull)
     for i in range(n):
         # a target outside the road ahead (narrowing) is pulled inside at once
         target[i] = min(max(target[i], lo[i]), max(lo[i], hi[i]))

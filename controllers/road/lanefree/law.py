@@ -155,7 +155,8 @@ class LaneFreeFlocking:
             sc.is_cav, n, order, k_side, periodic, period, target, urgent, due,
             p.lateral_mode == "fixed", edges, loop_edges, loop_edges is not None, v_des,
             np.flatnonzero(sc.static), held, float(p.candidate_step_m), float(p.hysteresis_mps),
-            float(p.queue_hysteresis), float(self.lat_max), reach)
+            float(p.queue_hysteresis), float(p.congested_hysteresis_mps), float(p.row_pull),
+            float(self.lat_max), reach)
         self.stats["target_changes"] += int(n_changes)
         self._urgent_now = urgent
         # a narrowing ahead that this CAV's body does not fit into where it is: its start
