@@ -23,6 +23,8 @@ from __future__ import annotations
 import dataclasses
 import importlib
 import inspect
+import os
+import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -165,16 +167,32 @@ def build(kind: str, params: Any, ctx: RoadContext) -> Any:
 
 
 # ----------------------------------------------------------------------------- user laws
+def _import_user_module(module_name: str):
+    """Import ``module_name`` as ``python -m`` would: from ``sys.path``, or else from the
+    current folder (the ``cosim`` script's own folder is on ``sys.path``, not the one it
+    runs in)."""
+    try:
+        return importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        cwd = os.getcwd()
+        top = module_name.split(".")[0]
+        if exc.name not in (top, module_name) or cwd in sys.path:
+            raise
+        sys.path.append(cwd)
+        return importlib.import_module(module_name)
+
+
 def _user_class(kind: str) -> type:
     module_name, _, class_name = kind.partition(":")
     if not module_name or not class_name:
         raise LawError(f"controller.kind {kind!r}: write a user law as 'module.path:ClassName'")
     try:
-        module = importlib.import_module(module_name)
+        module = _import_user_module(module_name)
     except Exception as exc:  # ImportError, or the user's module failing on import
         raise LawError(
             f"controller.kind {kind!r}: cannot import module {module_name!r} "
-            f"({type(exc).__name__}: {exc}); is its folder on PYTHONPATH?"
+            f"({type(exc).__name__}: {exc}); is its folder on PYTHONPATH or the current "
+            "folder?"
         ) from None
     cls = getattr(module, class_name, None)
     if cls is None or not callable(cls):

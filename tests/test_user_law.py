@@ -80,6 +80,22 @@ def test_the_issue_command_runs_zeroctl_verbatim(user_folder):
     assert _summary(out)["collisions_geometric_cav"] == 0
 
 
+def test_a_law_in_the_current_folder_is_found_without_pythonpath(user_folder):
+    """``python -m`` finds modules in the folder it runs in; so does ``cosim``: a user who
+    keeps ``mylaw.py`` beside their work needs no PYTHONPATH."""
+    work, env = user_folder
+    shutil.copy(EXAMPLES / "zeroctl.py", work / "herelaw.py")
+    env = {k: v for k, v in env.items() if k != "PYTHONPATH"}
+    proc, out = _cosim_run(work, env, "default", "--set", "controller.kind=herelaw:Zero",
+                           "--set", "scenario.duration_s=20", *SHORT)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "herelaw:Zero CAVs" in proc.stdout
+    assert _config(out)["controller"]["kind"] == "herelaw:Zero"
+    proc, _ = _cosim_run(work, env, "default", "--set", "controller.kind=nowhere:Zero")
+    assert proc.returncode == 2 and proc.stderr.startswith("error:")
+    assert "current folder" in proc.stderr
+
+
 @pytest.mark.sumo
 def test_zeroctl_runs_in_sumo_and_the_safety_layer_keeps_it_collision_free(user_folder):
     work, env = user_folder
