@@ -49,3 +49,20 @@ def test_shipped_sweep_smoke_runs_every_point_ok(tmp_path, sweep):
     rows = pd.read_csv(out / "results.csv")
     assert len(rows) >= 1
     assert (rows["status"] == "ok").all(), rows[["run_id", "status"]].to_string()
+
+
+@pytest.mark.sumo
+def test_calibrate_humans_smoke_writes_every_measure(tmp_path):
+    """``experiments/calibrate_humans.py --smoke``: every measure of the README's calibration
+    table is written, with a finite value."""
+    _run([sys.executable, str(REPO / "experiments" / "calibrate_humans.py"), "--smoke",
+          "--out", str(tmp_path)])
+    table = pd.read_csv(tmp_path / "calibrate_humans.csv")
+    assert {"lane", "obstacle", "ring", "gaps"} <= set(table["table"])
+    lane = table[table["table"] == "lane"]
+    # one lane of calibrated drivers: 2 164 veh/h at capacity (README); HCM 2 000-2 400
+    assert lane["q_lane_vph"].between(1500.0, 3000.0).all(), lane
+    ring = table[table["table"] == "ring"].iloc[0]
+    # TUM's ring at 225 veh/km with 0 % CAVs: their human model 6 613 veh/h
+    assert 4500.0 < ring["flow_vph"] < 9000.0
+    assert (table["collision_vehicles"].fillna(0) == 0).all()

@@ -47,6 +47,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 from scipy.spatial import cKDTree
 
 from controllers.neighbours import tree_points
@@ -73,8 +74,243 @@ class StepState:
     desired: np.ndarray | None = None  # desired speed, m/s (NaN: unknown)
 
 
+GAP_REACH_M = 150.0  # reach of the leader and side search, m (distance in (s, d))
+
+
 def overlapping_pairs(st: StepState, period: float | None) -> np.ndarray:
-    """Pairs (i < j) of vehicles whose rectangles overlap (strictly), (P, 2)."""
+    """Pairs (i < j) of vehicles whose rectangles overlap (strictly), (P, 2).
+
+    The candidates are the pairs within ``hypot(max length, max width)`` (m) of each
+    other, as scipy's cKDTree finds them (:func:`_pairs_within`, a sweep along ``s``).
+    With two or more overlaps the pairs come from the tree itself
+    (:func:`_overlapping_pairs_tree`), in its order, which the collision log keeps."""
+    if len(st.s) < 2:
+        return np.empty((0, 2), dtype=np.int64)
+    if not _fast_ok(st):
+        return _overlapping_pairs_tree(st, period)
+    reach = float(np.hypot(st.length.max(), st.width.max()))
+    px, py, box_y = _points(st, reach, period)
+    cand = _pairs_within(px, py, reach, period is not None, _period(period), box_y)
+    pairs = _overlaps(cand, st.s, st.d, st.length, st.width, period is not None,
+                      _period(period))
+    if len(pairs) >= 2:
+        return _overlapping_pairs_tree(st, period)
+    return pairs
+
+
+def gaps(st: StepState, period: float | None, lateral_overlap_margin_m: float = 0.0):
+    """Per-vehicle longitudinal gap to the leader, side clearance, (M,) m each (inf if none)."""
+    g_long, g_side, _ = gaps_and_leaders(st, period, lateral_overlap_margin_m)
+    return g_long, g_side
+
+
+def gaps_and_leaders(
+    st: StepState, period: float | None, lateral_overlap_margin_m: float = 0.0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`gaps` plus each vehicle's leader: (g_long, g_side, leader), (M,) each.
+
+    ``leader[i]`` is the index of the laterally overlapping vehicle ahead with the
+    smallest bumper gap (the one ``g_long[i]`` is measured to), -1 if none within
+    the 150 m reach.
+
+    The pairs within the reach are those scipy's cKDTree finds (:func:`_pairs_within`).
+    Of two leaders at the same gap, one with a higher index than the follower wins; which
+    of several such (or, without one, of several lower ones) depends on the tree's order:
+    then the tree decides (:func:`_gaps_and_leaders_tree`)."""
+    n = len(st.s)
+    if n < 2 or not _fast_ok(st):
+        return _gaps_and_leaders_tree(st, period, lateral_overlap_margin_m)
+    reach = GAP_REACH_M
+    px, py, box_y = _points(st, reach, period)
+    cand = _pairs_within(px, py, reach, period is not None, _period(period), box_y)
+    g_long, g_side, leader, tied = _gaps_kernel(
+        cand, st.s, st.d, st.length, st.width, period is not None, _period(period),
+        float(lateral_overlap_margin_m),
+    )
+    if tied:
+        return _gaps_and_leaders_tree(st, period, lateral_overlap_margin_m)
+    return g_long, g_side, leader
+
+
+def _fast_ok(st: StepState) -> bool:
+    """True when the compiled path applies: float64 arrays of finite values (otherwise
+    the tree path keeps numpy's NaN and dtype rules)."""
+    arrs = (st.s, st.d, st.length, st.width)
+    return all(
+        isinstance(a, np.ndarray) and a.dtype == np.float64 and a.ndim == 1 for a in arrs
+    ) and _all_finite(st.s, st.d, st.length, st.width)
+
+
+@njit(cache=True)
+def _all_finite(s, d, length, width):
+    """True if the four (M,) arrays hold no NaN or inf."""
+    return _finite(s) and _finite(d) and _finite(length) and _finite(width)
+
+
+@njit(cache=True, inline="always")
+def _finite(a):
+    for x in a:
+        if not np.isfinite(x):
+            return False
+    return True
+
+
+def _period(period: float | None) -> float:
+    return 0.0 if period is None else float(period)
+
+
+def _points(st: StepState, reach: float, period: float | None):
+    """The tree's coordinates (:func:`controllers.neighbours.tree_points`): ``px``, ``py``
+    (M,) m, contiguous, and the box along ``d`` (m; 0 off a ring)."""
+    if period is None:
+        return np.ascontiguousarray(st.s), np.ascontiguousarray(st.d), 0.0
+    pts, box = tree_points(np.column_stack([st.s, st.d]), reach, period)
+    return np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), float(box[1])
+
+
+@njit(cache=True, inline="always")
+def _tree_within(xi, yi, xj, yj, r2, periodic, period, box_y):
+    """cKDTree's test of ``query_pairs`` for points (xi, yi), (xj, yj): squared distance
+    (wrapped per axis on a ring, as its ``boxsize`` wraps) ``<= r^2``."""
+    dx = xi - xj
+    dy = yi - yj
+    if periodic:
+        hb = 0.5 * period
+        if dx < -hb:
+            dx = period + dx
+        elif dx > hb:
+            dx = dx - period
+        hby = 0.5 * box_y
+        if dy < -hby:
+            dy = box_y + dy
+        elif dy > hby:
+            dy = dy - box_y
+    return dx * dx + dy * dy <= r2
+
+
+@njit(cache=True)
+def _pairs_within(px, py, reach, periodic, period, box_y):
+    """The pairs (i < j) cKDTree's ``query_pairs(reach)`` returns for the points
+    (``px``, ``py``) (M,) m, as a set: (P, 2) int64, in sweep order (not the tree's).
+
+    A sweep along ``px`` sorted, each point against the next ones within a window a
+    little wider than the reach (then the tree's own test); on a ring (``periodic``,
+    ``px`` in [0, period)) also across the seam, each pair once. Two passes: count, fill."""
+    order = np.argsort(px)
+    xs = px[order]
+    ys = py[order]
+    out = np.empty((0, 2), np.int64)
+    cnt = _sweep(xs, ys, order, reach, periodic, period, box_y, out, False)
+    out = np.empty((cnt, 2), np.int64)
+    _sweep(xs, ys, order, reach, periodic, period, box_y, out, True)
+    return out
+
+
+@njit(cache=True)
+def _sweep(xs, ys, order, reach, periodic, period, box_y, out, fill):
+    """:func:`_pairs_within` over points sorted by ``xs``: the number of pairs, written to
+    ``out`` (P, 2) if ``fill``."""
+    n = xs.shape[0]
+    r2 = reach * reach
+    win = reach * (1.0 + 1e-9) + 1e-6
+    cnt = 0
+    for p in range(n):
+        xp, yp = xs[p], ys[p]
+        for q in range(p + 1, n):
+            if xs[q] - xp > win:
+                break
+            if _tree_within(xp, yp, xs[q], ys[q], r2, periodic, period, box_y):
+                if fill:
+                    out[cnt, 0] = min(order[p], order[q])
+                    out[cnt, 1] = max(order[p], order[q])
+                cnt += 1
+        if periodic:
+            for q in range(p):  # ahead across the seam
+                if (xs[q] - xp) + period > win:
+                    break
+                if xp - xs[q] <= win:  # q's own sweep found this pair
+                    continue
+                if _tree_within(xp, yp, xs[q], ys[q], r2, periodic, period, box_y):
+                    if fill:
+                        out[cnt, 0] = min(order[p], order[q])
+                        out[cnt, 1] = max(order[p], order[q])
+                    cnt += 1
+    return cnt
+
+
+@njit(cache=True, inline="always")
+def _wrap_ds(ds, periodic, period):
+    """``(ds + period / 2) % period - period / 2`` on a ring (numpy's float ``%``), else
+    ``ds``. ``%`` returns its operand unchanged in [0, period): skipped there."""
+    if periodic:
+        x = ds + 0.5 * period
+        if not (0.0 <= x < period):
+            x = x % period
+        return x - 0.5 * period
+    return ds
+
+
+@njit(cache=True)
+def _overlaps(cand, s, d, length, width, periodic, period):
+    """The candidate pairs (P, 2) whose rectangles overlap strictly, (Q, 2) int64."""
+    keep = np.zeros(cand.shape[0], np.bool_)
+    for k in range(cand.shape[0]):
+        i, j = cand[k, 0], cand[k, 1]
+        ds = _wrap_ds(s[j] - s[i], periodic, period)
+        keep[k] = (abs(ds) < 0.5 * (length[i] + length[j])) and (
+            abs(d[j] - d[i]) < 0.5 * (width[i] + width[j]))
+    return cand[keep]
+
+
+@njit(cache=True)
+def _gaps_kernel(cand, s, d, length, width, periodic, period, margin):
+    """Gaps, side clearances and leaders over the candidate pairs (P, 2), both ways each:
+    (g_long, g_side (M,) m, leader (M,), tied). ``tied``: some follower has two leaders at
+    its smallest gap on the same side of its index (the tree's order would decide)."""
+    n = s.shape[0]
+    g_long = np.full(n, np.inf)
+    g_side = np.full(n, np.inf)
+    leader = np.full(n, -1, np.int64)
+    n_hi = np.zeros(n, np.int64)  # leaders at the smallest gap with an index above
+    n_lo = np.zeros(n, np.int64)  # ... and below the follower's
+    for k in range(cand.shape[0]):
+        for way in range(2):
+            if way == 0:
+                a, b = cand[k, 0], cand[k, 1]
+            else:
+                a, b = cand[k, 1], cand[k, 0]
+            ds = _wrap_ds(s[b] - s[a], periodic, period)
+            half_l = 0.5 * (length[a] + length[b])
+            half_w = 0.5 * (width[a] + width[b])
+            dd = abs(d[b] - d[a])
+            lat = dd < half_w + margin
+            if ds > 0 and lat:
+                g = ds - half_l
+                if g < g_long[a]:
+                    g_long[a] = g
+                    leader[a] = b
+                    n_hi[a] = 1 if b > a else 0
+                    n_lo[a] = 0 if b > a else 1
+                elif g == g_long[a]:
+                    if b > a:
+                        n_hi[a] += 1
+                        leader[a] = b
+                    else:  # a leader above, if any, stays first
+                        n_lo[a] += 1
+            if abs(ds) < half_l and not lat:
+                gs = dd - half_w
+                if gs < g_side[a]:
+                    g_side[a] = gs
+    tied = False
+    for a in range(n):
+        if n_hi[a] >= 2 or (n_hi[a] == 0 and n_lo[a] >= 2):
+            tied = True
+    return g_long, g_side, leader, tied
+
+
+# ------------------------------------------------------------------ tree reference
+def _overlapping_pairs_tree(st: StepState, period: float | None) -> np.ndarray:
+    """:func:`overlapping_pairs` by cKDTree, in the tree's order."""
     if len(st.s) < 2:
         return np.empty((0, 2), dtype=np.int64)
     reach = float(np.hypot(st.length.max(), st.width.max()))
@@ -92,27 +328,17 @@ def overlapping_pairs(st: StepState, period: float | None) -> np.ndarray:
     return pairs[ov]
 
 
-def gaps(st: StepState, period: float | None, lateral_overlap_margin_m: float = 0.0):
-    """Per-vehicle longitudinal gap to the leader, side clearance, (M,) m each (inf if none)."""
-    g_long, g_side, _ = gaps_and_leaders(st, period, lateral_overlap_margin_m)
-    return g_long, g_side
-
-
-def gaps_and_leaders(
+def _gaps_and_leaders_tree(
     st: StepState, period: float | None, lateral_overlap_margin_m: float = 0.0
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`gaps` plus each vehicle's leader: (g_long, g_side, leader), (M,) each.
-
-    ``leader[i]`` is the index of the laterally overlapping vehicle ahead with the
-    smallest bumper gap (the one ``g_long[i]`` is measured to), -1 if none within
-    the 150 m reach."""
+    """:func:`gaps_and_leaders` by cKDTree (ties between leaders in the tree's order)."""
     n = len(st.s)
     g_long = np.full(n, np.inf)
     g_side = np.full(n, np.inf)
     leader = np.full(n, -1, dtype=np.int64)
     if n < 2:
         return g_long, g_side, leader
-    reach = 150.0
+    reach = GAP_REACH_M
     pts, box = tree_points(np.column_stack([st.s, st.d]), reach, period)
     pairs = cKDTree(pts, boxsize=box).query_pairs(reach, output_type="ndarray")
     if len(pairs) == 0:
@@ -300,11 +526,12 @@ class TrafficRecorder:
                 if acc is not None:
                     acc.collisions_geom += 1
         self._prev_overlaps = now
-        cav_set = {k for k, c in zip(st.ids, st.is_cav, strict=True) if c}
         # SUMO lists a pair in every step it overlaps: count only pairs that start to.
         sumo_now = {tuple(sorted(pair)) for pair in sumo_collisions}
         new_sumo = sorted(sumo_now - self._prev_sumo)
         self._prev_sumo = sumo_now
+        if new_sumo:
+            cav_set = {k for k, c in zip(st.ids, st.is_cav, strict=True) if c}
         for a, b in new_sumo:
             kind = "cav" if (a in cav_set or b in cav_set) else "hdv_only"
             self.collisions_sumo[kind] += 1
