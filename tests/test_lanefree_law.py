@@ -9,6 +9,8 @@ scenarios in SUMO, with human drivers, are in tests/test_builtin_scenarios.py an
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -224,3 +226,39 @@ def test_a_cav_yields_to_an_announced_mover_unless_it_would_brake_harshly():
 def test_invalid_parameters_are_refused(bad):
     with pytest.raises(ParameterError):
         LaneFreeParams(**bad)
+
+
+def _narrowing_road() -> RoadProfile:
+    """10.2 m wide up to 100 m, then 6.8 m (edges +-5.1, then +-3.4 m)."""
+    return RoadProfile(s0=np.array([-1e3, 100.0]), right=np.array([-5.1, -3.4]),
+                       left=np.array([5.1, 3.4]), length_m=1e3, periodic=False)
+
+
+def test_a_ramp_vehicle_converging_fast_is_seen_on_the_road_before_it_is_near():
+    """A vehicle 9 m outside the right edge (beyond ``entry_reach_m``) moving towards the
+    road at 4 m/s reaches it within ``entry_horizon_s``: the law places it on the road; one
+    running parallel to the road at the same place stays where it is."""
+    law = LaneFreeFlocking(LaneFreeParams(), RoadContext(dt=DT))
+    obs = _obs([[0.0, 0.0]], [[25.0, 0.0]], [30.0])
+    oq = np.array([[10.0, -5.1 - 0.9 - 9.0], [10.0, -5.1 - 0.9 - 9.0]])
+    op = np.array([[25.0, 0.0], [25.0, 0.0]])
+    ow = np.array([1.8, 1.8])
+    d = law._entering(obs, oq, op, ow, v_lat=np.array([4.0, 0.0]))
+    assert d[0] == pytest.approx(-5.1 + 0.9 + 0.1)  # its nearest inside position
+    assert d[1] == oq[1, 1]  # not converging: not merging yet
+
+
+def test_a_moving_human_that_a_narrowing_will_squeeze_is_seen_where_it_must_go():
+    """A human driver at d = 4 m, 20 m before the road narrows to +-3.4 m, driving at
+    10 m/s, must move in within ``squeeze_s``: the law sees it at its nearest inside
+    position of the narrow part; a stopped vehicle there (an obstacle) and one far before
+    the narrowing are seen where they are."""
+    law = LaneFreeFlocking(LaneFreeParams(), RoadContext(dt=DT))
+    obs = dataclasses.replace(_obs([[0.0, 0.0]], [[10.0, 0.0]], [30.0]),
+                              road=_narrowing_road())
+    oq = np.array([[80.0, 4.0], [80.0, 4.0], [-200.0, 4.0]])
+    op = np.array([[10.0, 0.0], [0.0, 0.0], [10.0, 0.0]])
+    ow = np.array([1.8, 1.8, 1.8])
+    d = law._entering(obs, oq, op, ow, v_lat=np.zeros(3))
+    assert d[0] == pytest.approx(3.4 - 0.9 - 0.1)
+    assert d[1] == 4.0 and d[2] == 4.0

@@ -76,6 +76,7 @@ class LaneFreeFlocking:
         self._mem_last = np.empty(0, np.int64)  # call (below) in which it was last present
         self._calls = 0  # steps with CAVs so far
         self._v_prev: dict = {}  # other id -> last speed, m/s
+        self._d_prev: dict = {}  # other id -> last lateral position, m
         self._moved: set = set()  # others seen moving (a stopped obstacle never is)
         self._yield_since: dict = {}  # (CAV id, vehicle id) -> time the yield began, s
         self._urgent_now = np.zeros(0, bool)
@@ -226,7 +227,14 @@ class LaneFreeFlocking:
         v_prev = np.array([self._v_prev.get(i, np.nan) if i is not None else np.nan
                            for i in oids])
         a_other = np.where(np.isfinite(v_prev), (op[:, 0] - v_prev) / obs.dt, 0.0)
-        od = self._entering(obs, oq, ow)
+        # lateral speed towards the road's frame from the positions (a vehicle on an
+        # on-ramp reports 0 across its own lane while it converges on the road)
+        d_prev = np.array([self._d_prev.get(i, np.nan) if i is not None else np.nan
+                           for i in oids])
+        v_lat = np.where(np.isfinite(d_prev), (oq[:, 1] - d_prev) / obs.dt, op[:, 1])
+        self._d_prev = {i: float(d) for i, d in zip(oids, oq[:, 1], strict=True)
+                        if i is not None}
+        od = self._entering(obs, oq, op, ow, v_lat)
         return _Scene(
             s=np.concatenate([obs.q[:, 0], oq[:, 0]]),
             d=np.concatenate([obs.q[:, 1], od]),
@@ -243,11 +251,16 @@ class LaneFreeFlocking:
             n=n,
         )
 
-    def _entering(self, obs: Observation, oq: np.ndarray, ow: np.ndarray) -> np.ndarray:
+    def _entering(self, obs: Observation, oq: np.ndarray, op: np.ndarray,
+                  ow: np.ndarray, v_lat: np.ndarray) -> np.ndarray:
         """Lateral positions (M,) m of the sensed vehicles as the law uses them: a vehicle
-        still outside the road but within ``entry_reach_m`` of its edge (on an on-ramp
-        about to merge) is taken to be on the road already, at its nearest inside
-        position: CAVs behind it there keep their gap to it, CAVs beside it make room."""
+        still outside the road but about to merge (on an on-ramp: within ``entry_reach_m``
+        of its edge, or reaching it within ``entry_horizon_s`` at its lateral speed towards
+        the road) is taken to be on the road already, at its nearest inside position: CAVs
+        behind it there keep their gap to it, CAVs beside it make room.
+
+        Args: ``oq``, ``op`` (M, 2) positions m and velocities m/s (along, across);
+        ``ow`` (M,) widths m; ``v_lat`` (M,) lateral speeds in the road frame, m/s."""
         p = self.params
         d = oq[:, 1].copy()
         if obs.road is None:
@@ -256,8 +269,22 @@ class LaneFreeFlocking:
         lo = edges[:, 0] + 0.5 * ow + 0.1
         hi = edges[:, 1] - 0.5 * ow - 0.1
         out = np.maximum(lo - d, d - hi)  # > 0: outside by this much
-        merging = (out > 0) & (out < p.entry_reach_m)
+        inward_mps = np.where(d < lo, v_lat, -v_lat)  # lateral speed towards the road
+        reach_m = p.entry_reach_m + p.entry_horizon_s * np.maximum(inward_mps, 0.0)
+        merging = (out > 0) & (out < reach_m)
         d[merging] = np.clip(d[merging], lo[merging], np.maximum(lo, hi)[merging])
+        # a moving vehicle on the road that the road narrows on within its squeeze horizon
+        # (SUMO's drivers move in only when their lane's edge reaches them) is taken at its
+        # nearest inside position there: CAVs beside it make room before it is pushed in
+        if not obs.road.is_constant:
+            moving = (out <= 0) & (np.abs(op[:, 0]) > 0.1)
+            if moving.any():
+                ahead_m = np.maximum(p.squeeze_min_m, p.squeeze_s * op[moving, 0])
+                narrow = obs.road.narrowest(oq[moving, 0], ahead_m)
+                w = ow[moving]
+                lo_a = narrow[:, 0] + 0.5 * w + 0.1
+                hi_a = np.maximum(lo_a, narrow[:, 1] - 0.5 * w - 0.1)
+                d[moving] = np.clip(d[moving], lo_a, hi_a)
         return d
 
     # ------------------------------------------------------------------ lateral target

@@ -87,6 +87,12 @@ class LaneFreeParams:
         entry_reach_m: a vehicle outside the road within this distance of its edge (about
             to merge from an on-ramp) counts as on the road at its nearest inside
             position, m.
+        entry_horizon_s: ... or that reaches the edge within this time at its lateral speed
+            towards the road (a ramp vehicle is seen while it can still be given a gap), s.
+        squeeze_s, squeeze_min_m: a moving sensed vehicle whose body leaves the road's
+            narrowest edges within this time at its speed (at least this distance ahead) is
+            seen at its nearest inside position there (a human driver about to be squeezed
+            in by a narrowing), s and m.
     Comparison:
         lateral_mode: "free" (the lane-free law) or "fixed": every CAV keeps the lateral
             position it entered with (rows, or lanes on a lane network): the same
@@ -148,6 +154,9 @@ class LaneFreeParams:
     yield_decel_mps2: float = 2.0
     window: int = 16
     entry_reach_m: float = 6.0
+    entry_horizon_s: float = 3.0
+    squeeze_s: float = 3.0
+    squeeze_min_m: float = 20.0
     lateral_mode: str = "free"
 
     def __post_init__(self) -> None:
@@ -181,7 +190,7 @@ class LaneFreeParams:
                      "clear_cap_m", "nudge_gain", "hysteresis_mps", "order_gain",
                      "bias_speed_low_mps", "urgent_gain_mps", "bias_speed_high_mps",
                      "queue_speed_mps", "queue_hysteresis", "congested_hysteresis_mps",
-                     "entry_reach_m",
+                     "entry_reach_m", "entry_horizon_s", "squeeze_s", "squeeze_min_m",
                      "cut_in_gap_m", "cut_in_speed_margin_mps"):
             if getattr(self, name) < 0:
                 raise ParameterError(f"{name} must be >= 0, got {getattr(self, name)!r}")
