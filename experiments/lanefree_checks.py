@@ -272,9 +272,12 @@ def evaluate(results: pd.DataFrame, smoke: bool = False) -> pd.DataFrame:
             op = _OPS[c.op]
             if c.per_seed:
                 passed_each = op(vals, c.threshold) & np.isfinite(vals)
-                worst_i = int(np.argmin(passed_each)) if not passed_each.all() else (
-                    int(np.nanargmax(vals)) if c.op in ("<", "<=", "==") else
-                    int(np.nanargmin(vals)))
+                if not np.isfinite(vals).all():  # a missing value is the worst
+                    worst_i = int(np.argmin(np.isfinite(vals)))
+                elif c.op in ("<", "<=", "=="):
+                    worst_i = int(np.argmax(vals))
+                else:
+                    worst_i = int(np.argmin(vals))
                 measured, passed = float(vals[worst_i]), bool(passed_each.all())
             else:
                 measured = float(np.mean(vals))
