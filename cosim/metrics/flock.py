@@ -15,7 +15,7 @@ Sources:
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import coo_matrix
+from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
@@ -71,14 +71,17 @@ def velocity_mismatch(p: np.ndarray, p_ref: np.ndarray | None = None) -> float:
     return float(np.mean(np.sum((p - c) ** 2, axis=1)))
 
 
-def deviation_energy(q: np.ndarray, d: float, r: float, period: float | None = None) -> float:
+def deviation_energy(q: np.ndarray, d: float, r: float, period: float | None = None,
+                     pairs: np.ndarray | None = None) -> float:
     """Lattice deviation energy ``E = 1/(|E|+1) sum_(i,j in E) (||q_j - q_i|| - d)^2``, m^2.
 
     OS06 eq. 7 with the proximity net of range ``r`` (directed edges, so each
     undirected pair counts twice in the sum and in ``|E|``). Zero for a perfect
-    alpha-lattice.
+    alpha-lattice. ``pairs``: that net's ``neighbour_pairs(q, r, period)`` (P, 2) if
+    already known.
     """
-    pairs = neighbour_pairs(q, r, period, "auto")
+    if pairs is None:
+        pairs = neighbour_pairs(q, r, period, "auto")
     if len(pairs) == 0:
         return 0.0
     dq = q[pairs[:, 1]] - q[pairs[:, 0]]
@@ -104,16 +107,26 @@ def dispersion(q: np.ndarray) -> float:
     return float(np.sqrt(np.sum(np.var(q, axis=0, ddof=1))))
 
 
-def connectivity(q: np.ndarray, r: float, period: float | None = None) -> tuple[int, float]:
+def connectivity(q: np.ndarray, r: float, period: float | None = None,
+                 pairs: np.ndarray | None = None) -> tuple[int, float]:
     """Proximity-graph connectivity: (number of components, largest component share).
 
-    Graph edges join agents closer than ``r`` (m), OS06's proximity net.
+    Graph edges join agents closer than ``r`` (m), OS06's proximity net; ``pairs``: its
+    ``neighbour_pairs(q, r, period)`` (P, 2) if already known.
     """
     n = len(q)
     if n == 0:
         return 0, np.nan
-    pairs = neighbour_pairs(q, r, period, "auto")
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    if pairs is None:
+        pairs = neighbour_pairs(q, r, period, "auto")
+    # CSR straight from the pairs grouped by row (neighbour_pairs sorts them): the graph a
+    # COO matrix of the pairs converts to, without the conversion.
+    if len(pairs) > 1 and np.any(pairs[1:, 0] < pairs[:-1, 0]):
+        pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
+    indptr = np.zeros(n + 1, dtype=np.int32)
+    np.cumsum(np.bincount(pairs[:, 0], minlength=n), out=indptr[1:])
+    graph = csr_matrix((np.ones(len(pairs)), pairs[:, 1].astype(np.int32), indptr),
+                       shape=(n, n))
     k, labels = connected_components(graph, directed=False)
     return int(k), float(np.bincount(labels).max() / n)
 
@@ -128,17 +141,21 @@ def flock_metrics(
     walls: Walls | None = None,
     period: float | None = None,
 ) -> dict[str, float]:
-    """All flock metrics of one instant, keyed by column name (units in the name)."""
-    n_comp, largest = connectivity(q, r, period)
+    """All flock metrics of one instant, keyed by column name (units in the name).
+
+    The proximity net and the nearest-neighbour distances are computed once and shared."""
+    pairs = neighbour_pairs(q, r, period, "auto") if len(q) else None
+    n_comp, largest = connectivity(q, r, period, pairs)
+    nn = nearest_neighbour_distances(q, period) if len(q) > 1 else None
     return {
-        "min_agent_distance_m": min_pair_distance(q, period),
+        "min_agent_distance_m": float(np.min(nn)) if nn is not None else np.inf,
         "min_obstacle_distance_m": min_obstacle_distance(q, circles, walls),
         "velocity_mismatch_m2ps2": velocity_mismatch(p),
         "leader_velocity_mismatch_m2ps2": (
             velocity_mismatch(p, p_ref) if p_ref is not None else np.nan
         ),
-        "deviation_energy_m2": deviation_energy(q, d, r, period),
-        "avg_nn_distance_m": average_nn_distance(q, period),
+        "deviation_energy_m2": deviation_energy(q, d, r, period, pairs),
+        "avg_nn_distance_m": float(np.mean(nn)) if nn is not None else np.nan,
         "velocity_alignment": velocity_alignment(p),
         "dispersion_m": dispersion(q),
         "n_components": n_comp,

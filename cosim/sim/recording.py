@@ -16,7 +16,7 @@ import pandas as pd
 from controllers import protocol
 from cosim.metrics import capacity as cap
 from cosim.metrics.flock import flock_metrics
-from cosim.metrics.jams import JamRecorder
+from cosim.metrics.jams import JamRecorder, align
 from cosim.metrics.traffic import StepState, TrafficRecorder
 from cosim.sim.loop import Loop, StepData
 
@@ -32,8 +32,10 @@ def step_state(st: StepData, road) -> StepState:
     state = st.state
     rows = np.flatnonzero(state.on_main)
     edges = road.edges(state.s[rows]) if len(rows) else np.zeros((0, 2))
+    ids = (list(state.ids) if len(rows) == len(state.ids)
+           else list(map(state.ids.__getitem__, rows.tolist())))
     return StepState(
-        t=st.t, ids=[state.ids[r] for r in rows], s=state.s[rows], s_front=state.s_front[rows],
+        t=st.t, ids=ids, s=state.s[rows], s_front=state.s_front[rows],
         d=state.d[rows], v=state.v[rows], v_lat=state.v_lat[rows], length=state.length[rows],
         width=state.width[rows], is_cav=state.is_cav[rows], edge_right=edges[:, 0],
         edge_left=edges[:, 1], is_static=state.is_static[rows], desired=state.desired[rows],
@@ -131,7 +133,8 @@ class CapacityRecorder:
     * over the whole run: the distance driven by CAVs (km), the base of the safety layer's
       activations per vehicle-km (the safety layer counts over the whole run too).
 
-    Per-step cost: one dictionary look-up per vehicle and a few vectorised masks.
+    Per-step cost: a few vectorised masks, and when the vehicles changed one C-level
+    dictionary look-up per vehicle (:func:`cosim.metrics.jams.align`).
 
     Args:
         dt: step, s. layout: zones and cross-sections. warmup_s: start of the measured
@@ -157,7 +160,7 @@ class CapacityRecorder:
         self._crossings: list[list[float]] = [[] for _ in self.xs]
         self._pending_every = max(1, int(round(PENDING_SAMPLE_S / dt)))
         self._k = 0
-        self._prev_index: dict = {}
+        self._prev_ids: list = []
         self._prev_front = np.zeros(0)
         self._prev_v = np.zeros(0)
         self.harsh = {"cav": [0, 0], "hdv": [0, 0]}  # harsh steps, steps
@@ -177,40 +180,59 @@ class CapacityRecorder:
         desired = (np.full(len(ss.s), np.nan) if ss.desired is None
                    else np.asarray(ss.desired, dtype=float))
         known = np.isfinite(desired)
+        all_known = bool(known.all())
         for name, (z0, z1) in self.zones.items():
-            m = traffic & (ss.s >= z0) & (ss.s < z1)
-            if m.any():
+            m = (ss.s >= z0) & (ss.s < z1)
+            m &= traffic
+            n_in = int(np.count_nonzero(m))
+            if n_in:
                 sums = self._sums[name]
-                mk = m & known
-                sums[0, b] += self.dt * int(np.count_nonzero(m))
-                sums[1, b] += self.dt * float(np.sum(ss.v[mk]))
-                sums[2, b] += self.dt * float(np.sum(desired[mk]))
+                mk = m if all_known else m & known
+                sums[0, b] += self.dt * n_in
+                sums[1, b] += self.dt * float(ss.v[mk].sum())
+                sums[2, b] += self.dt * float(desired[mk].sum())
         if pending is not None and self._k % self._pending_every == 0:
             self.pending[b] = max(self.pending[b], float(pending()))
         self._k += 1
 
-        idx = np.fromiter((self._prev_index.get(i, -1) for i in ss.ids), dtype=np.int64,
-                          count=len(ss.ids))
-        seen = idx >= 0
-        if len(self.xs) and seen.any():
-            prv = self._prev_front[idx[seen]]
-            cur = ss.s_front[seen]
-            for k, x in enumerate(self.xs):
-                hit = (prv < x) & (cur >= x)
-                if hit.any():
-                    frac = (x - prv[hit]) / np.maximum(cur[hit] - prv[hit], 1e-9)
-                    self._crossings[k].extend((t - self.dt + frac * self.dt).tolist())
-        if t > self.warmup_s + 1e-9 and seen.any():
-            acc = (ss.v[seen] - self._prev_v[idx[seen]]) / self.dt
+        ids = list(ss.ids)  # a copy: kept for the next step
+        idx = align(self._prev_ids, ids)  # None: the same vehicles as in the last step
+        if idx is None:
+            seen = None
+            any_seen = len(ids) > 0
+        else:
+            seen = idx >= 0
+            any_seen = bool(seen.any())
+            idx = idx[seen]
+        if len(self.xs) and any_seen:
+            if seen is None:
+                prv, cur = self._prev_front, ss.s_front
+            else:
+                prv, cur = self._prev_front[idx], ss.s_front[seen]
+            xs = self.xs[:, None]  # (K, 1)
+            hits = (prv < xs) & (cur >= xs)  # (K, M')
+            for k in np.flatnonzero(hits.any(axis=1)):
+                hit = hits[k]
+                x = self.xs[k]
+                frac = (x - prv[hit]) / np.maximum(cur[hit] - prv[hit], 1e-9)
+                self._crossings[k].extend((t - self.dt + frac * self.dt).tolist())
+        if t > self.warmup_s + 1e-9 and any_seen:
+            if seen is None:
+                acc = (ss.v - self._prev_v) / self.dt
+                is_cav, moving = ss.is_cav, traffic
+            else:
+                acc = (ss.v[seen] - self._prev_v[idx]) / self.dt
+                is_cav, moving = ss.is_cav[seen], traffic[seen]
             harsh = np.abs(acc) > HARSH_ACCEL_MPS2
-            is_cav = ss.is_cav[seen]
-            moving = traffic[seen]
-            for kind, mask in (("cav", is_cav & moving), ("hdv", ~is_cav & moving)):
-                self.harsh[kind][0] += int(np.count_nonzero(harsh & mask))
-                self.harsh[kind][1] += int(np.count_nonzero(mask))
+            cav_moving = is_cav & moving
+            hdv_moving = moving & ~is_cav
+            self.harsh["cav"][0] += int(np.count_nonzero(harsh & cav_moving))
+            self.harsh["cav"][1] += int(np.count_nonzero(cav_moving))
+            self.harsh["hdv"][0] += int(np.count_nonzero(harsh & hdv_moving))
+            self.harsh["hdv"][1] += int(np.count_nonzero(hdv_moving))
         cav = ss.is_cav & traffic
         self.cav_distance_m += self.dt * float(np.sum(ss.v[cav]))
-        self._prev_index = {vid: k for k, vid in enumerate(ss.ids)}
+        self._prev_ids = ids
         self._prev_front = np.asarray(ss.s_front, dtype=float)
         self._prev_v = np.asarray(ss.v, dtype=float)
 
