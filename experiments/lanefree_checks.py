@@ -337,7 +337,8 @@ def lateral_outputs(sweep_dir: Path, results: pd.DataFrame, out: Path) -> pd.Dat
 
     res = results[(results["status"] == "ok") & results["variant"].str.startswith("lateral/")]
     hists, rows = [], []
-    for _, r in res.sort_values("variant").iterrows():
+    res = res.assign(_k=res["variant"].map(lambda v: float(arm_of(v).split("/k")[1])))
+    for _, r in res.sort_values("_k").iterrows():  # by density, numerically
         run = sweep_dir / "runs" / str(r["run_id"])
         tr = pd.read_csv(run / "trajectories.csv")
         warm = float(r.get("scenario.warmup_s", 300.0)) if "scenario.warmup_s" in r else 300.0

@@ -765,10 +765,7 @@ def _nolane(tmp: Path) -> str:
     return re.sub(r'(<edge id="narrow"[^>]*>)\s*<lane[^>]*/>', r"\1", net.read_text(), count=1)
 
 
-API = [pytest.param(name, marks=pytest.mark.xfail(
-            strict=True, reason="cosim/sim/runner.py writes out_dir after the run without "
-                                "the output-folder check (issue 14 report)"))
-       if name == "run_into_a_file" else name for name in sorted(_api_cases())]
+API = sorted(_api_cases())
 
 
 @pytest.mark.parametrize("name", API)

@@ -27,6 +27,7 @@ from cosim.errors import ConfigError, CosimError, SumoStartError
 from cosim.metrics import capacity as cap
 from cosim.metrics.jams import JamRecorder
 from cosim.metrics.traffic import TrafficRecorder
+from cosim.output_dir import check_output_dir
 from cosim.sim.loop import Loop
 from cosim.sim.recording import CapacityRecorder, attach_recorders
 from cosim.sim.results import RunResult, versions
@@ -87,12 +88,15 @@ def run_scenario(sc: Scenario, out_dir: str | Path | None = None, gui: bool = Fa
 
     Args:
         sc: the scenario.
-        out_dir: where to write the outputs (created; must be prepared by the caller
-            when it must be empty: :func:`cosim.output_dir.prepare_output_dir`).
+        out_dir: where to write the outputs (created; checked before the run, see
+            :func:`cosim.output_dir.check_output_dir`; prepared by the caller when it must
+            be empty: :func:`cosim.output_dir.prepare_output_dir`).
         gui: watch the run in sumo-gui (SUMO world only).
         progress: ``progress(k, n_steps)`` after every step.
         hooks: ``hooks(loop)`` before the run: attach timers or recorders of your own.
     """
+    if out_dir is not None:  # an existing file, a path under a file, unwritable: before the run
+        check_output_dir(out_dir, keep=True)
     with tempfile.TemporaryDirectory(prefix="cosim_") as tmp:
         work = Path(tmp)
         result = _run_in(sc, work, gui, progress, hooks)
