@@ -84,6 +84,14 @@ drivers are not cooperative: a slow or stopped human driver whose own band is bl
 ahead is given the same yield by the CAVs behind it in the neighbouring bands, so it can
 merge out (nobody traps it).
 
+**Where the law sees others** (``law._entering``): a vehicle still outside the road (on an
+on-ramp) counts as on the road, at its nearest inside position, once it is within
+``entry_reach_m`` of the edge or would reach it within ``entry_horizon_s`` at its lateral
+speed towards the road (from its positions: a ramp vehicle reports none across its own
+lane); a moving vehicle whose body leaves the narrowest edges of the next
+``max(squeeze_min_m, squeeze_s * v)`` metres counts at its nearest inside position there
+(a human driver that a narrowing will squeeze in: CAVs make room before it is pushed in).
+
 All terms are computed per CAV over a fixed window of neighbours in road order (no N x N
 array), in compiled kernels (numba; :mod:`.kernels`) that give what the vectorised numpy
 form of the law gave, to round-off (``tests/test_exactness.py``); memory across steps
