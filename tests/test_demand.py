@@ -624,6 +624,7 @@ def test_sumo_reads_the_human_driver_attributes(
 
 
 @pytest.mark.sumo
+@pytest.mark.slow(seconds=4.5)
 def test_human_drivers_get_around_a_stopped_vehicle(tmp_path: Path) -> None:
     """Issue 12's obstacle, human drivers only: a stopped vehicle 5 m x 3.4 m covering the
     right third of a 1 km x 10.2 m road at s = 550 m, 4 000 veh/h. With SUMO's default
@@ -655,6 +656,7 @@ def test_human_drivers_get_around_a_stopped_vehicle(tmp_path: Path) -> None:
 
 
 @pytest.mark.sumo
+@pytest.mark.slow(seconds=4.5)
 def test_one_lane_carries_2000_to_2400_vph_with_the_calibrated_drivers() -> None:
     """Road-limited lane capacity of the three-lane baseline: on a 1 km ring of three
     3.4 m lanes (no entrance) with LC2013 human drivers, Edie's flow per lane near the

@@ -105,6 +105,7 @@ def test_the_package_and_its_data_come_from_the_install(installed):
     assert not (installed["site"] / "examples").exists()
 
 
+@pytest.mark.slow(seconds=16)
 def test_cosim_run_from_an_unrelated_folder(installed):
     proc = _python(installed, "-m", "cosim", "run", "default", "--set", "scenario.duration_s=10",
                    "--set", "scenario.world=road", "--set", "scenario.warmup_s=2",

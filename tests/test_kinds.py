@@ -2,7 +2,7 @@
 holds its shape on the road.
 
 * ``cosim run ring --set controller.kind=KIND --set scenario.duration_s=30`` for each
-  registered kind (one SUMO subprocess each, 30 s simulated): exit 0, no collision
+  registered kind (one SUMO process each, 30 s simulated): exit 0, no collision
   with a CAV, and config.toml records the kind's resolved parameters (every parameter
   with a value, road defaults included) and reads back to the same law.
 * ``formation`` (controllers/road/formation.py): unit properties of the group law, the
@@ -16,14 +16,14 @@ holds its shape on the road.
 from __future__ import annotations
 
 import os
-import subprocess
-import sys
 import tomllib
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pandas as pd
 import pytest
+from sumo_cases.isolated import cosim_cli, run_isolated
 
 from controllers import registry
 from controllers.observation import Observation
@@ -36,11 +36,6 @@ KINDS = ["flocking", "flocking_timegap", "boundary_points", "formation", "vicsek
 SHORT = ["--set", "scenario.warmup_s=10", "--set", "scenario.interval_s=20"]
 
 
-def _cosim() -> list[str]:
-    script = Path(sys.executable).with_name("cosim")
-    return [str(script)] if script.is_file() else [sys.executable, "-m", "cosim"]
-
-
 @pytest.fixture(scope="module")
 def sumo_env(tmp_path_factory) -> dict:
     env = dict(os.environ)
@@ -48,12 +43,14 @@ def sumo_env(tmp_path_factory) -> dict:
     return env
 
 
-def _cosim_run(tmp_path: Path, env: dict, *args: str) -> tuple[subprocess.CompletedProcess, Path]:
+def _cosim_run(tmp_path: Path, env: dict, *args: str) -> tuple[SimpleNamespace, Path]:
+    """``cosim run ARGS`` in a process of its own (``sumo_cases/isolated.py``): its exit
+    status and stdout, and its output folder."""
     out = tmp_path / "out"
-    proc = subprocess.run([*_cosim(), "run", *args, "--quiet", "--out", str(out)], cwd=tmp_path,
-                          env=env, capture_output=True, text=True, timeout=600, check=False)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return proc, out
+    code, stdout = run_isolated(cosim_cli, ["run", *args, "--quiet", "--out", str(out)],
+                                str(tmp_path), env=env)
+    assert code == 0, f"cosim run {' '.join(args)}: exit {code}\n{stdout[-2000:]}"
+    return SimpleNamespace(returncode=code, stdout=stdout), out
 
 
 def _plain(value):
@@ -74,6 +71,7 @@ def test_every_kind_of_the_issue_is_registered():
 
 @pytest.mark.sumo
 @pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.slow(seconds=5)
 def test_every_kind_drives_the_ring_in_sumo(tmp_path, sumo_env, kind):
     proc, out = _cosim_run(tmp_path, sumo_env, "ring", "--set", f"controller.kind={kind}",
                            "--set", "scenario.duration_s=30", *SHORT)
@@ -214,6 +212,7 @@ def test_formation_scenario_converges_in_the_road_world(over, n_groups):
 
 
 @pytest.mark.sumo
+@pytest.mark.slow(seconds=4.5)
 def test_formation_scenario_in_sumo_converges_and_holds_its_shape(tmp_path, sumo_env):
     """Measured from t = 0.5 s: worst group's error from > 20 m to < 0.1 m within 45 s,
     then held for the remaining 2 minutes."""

@@ -37,6 +37,7 @@ def test_the_walk_through_names_only_cosim_commands():
 
 
 @pytest.mark.sumo
+@pytest.mark.slow(seconds=32)
 def test_the_walk_through_runs_as_written(tmp_path):
     outputs: list[Path] = []
     for cmd in walk_through_commands():

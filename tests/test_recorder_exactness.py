@@ -503,6 +503,7 @@ def test_jam_recorder_matches_the_old_one_step_by_step(seed, period, warmup, xs)
     assert new.summary() == old.summary()
 
 
+@pytest.mark.slow(seconds=5)
 def test_the_jam_cases_exercise_what_they_compare():
     """The synthetic sequences have long standstills and blocked windows (or the step-by-step
     comparison above would compare zeros)."""
@@ -640,6 +641,7 @@ def _meta(res) -> str:
 
 
 @pytest.mark.parametrize("case", sorted(RUNS))
+@pytest.mark.slow(seconds=4)
 def test_road_world_run_matches_the_old_recorders(case, monkeypatch):
     name, over = RUNS[case]
     new = _road_run(name, over)

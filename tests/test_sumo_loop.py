@@ -2,9 +2,10 @@
 boundary violations are seen by SUMO and by our metrics, the ring wraps, vehicles are
 conserved, and the safety layer keeps dense CAV traffic collision-free.
 
-libsumo holds one simulation per process: every case runs in its own subprocess
-(``tests/sumo_cases/*.py`` print ``RESULT <json>``), with networks built in a
-temporary cache. Numbers: 0.1 s steps, cars 4.5 m x 1.8 m, a 10.2 m wide road.
+libsumo holds one simulation per process: every case runs in its own process
+(``tests/sumo_cases/world_cases.py`` as a subprocess that prints ``RESULT <json>``;
+scenarios through ``run_case.main``, forked by ``sumo_cases/isolated.py``), with networks
+built in a temporary cache. Numbers: 0.1 s steps, cars 4.5 m x 1.8 m, a 10.2 m wide road.
 """
 
 from __future__ import annotations
@@ -16,6 +17,8 @@ import sys
 from pathlib import Path
 
 import pytest
+from sumo_cases import run_case
+from sumo_cases.isolated import run_isolated
 
 pytestmark = pytest.mark.sumo
 
@@ -55,7 +58,10 @@ def world_case(sumo_env):
 
 
 def _scenario(tmp_path: Path, spec: dict, env: dict) -> dict:
-    return _run("run_case.py", str(tmp_path / "out"), json.dumps(spec), env=env)
+    """``sumo_cases/run_case.py``'s result for ``spec``, run in a process of its own."""
+    result = run_isolated(run_case.main, str(tmp_path / "out"), json.dumps(spec), env=env,
+                          timeout_s=240.0)
+    return json.loads(json.dumps(result))  # as the RESULT line would carry it
 
 
 # --------------------------------------------------------------------------------------
@@ -212,6 +218,7 @@ def test_vehicles_are_conserved(tmp_path, sumo_env):
 # --------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow(seconds=5)
 def test_dense_cav_traffic_is_collision_free_and_stays_on_the_road(tmp_path, sumo_env):
     """100% CAVs of the time-gap flocking law (the previous default), 6000 veh/h requested
     on a 500 m road for 90 s (SUMO cannot insert them all): no collision of any kind, no
@@ -301,6 +308,7 @@ def _ring(density_vpkm: float, params: dict) -> dict:
     }
 
 
+@pytest.mark.slow(seconds=16)
 def test_time_gap_reference_gives_a_real_ring_fundamental_diagram(tmp_path, sumo_env):
     """400 m ring, 100 % CAVs. With the time-gap reference the speed falls with density
     (measured, seed 1: 28.9 m/s at 50 veh/km, 12.2 m/s at 250 veh/km); a constant
@@ -324,6 +332,7 @@ def test_time_gap_reference_gives_a_real_ring_fundamental_diagram(tmp_path, sumo
     assert pinned["safety_speed_activations"] > 100 * max(dense["safety_speed_activations"], 1)
 
 
+@pytest.mark.slow(seconds=19)
 def test_fast_reference_tracking_relieves_the_safety_layer_in_ring_congestion(tmp_path, sumo_env):
     """1 km ring at 250 veh/km, 100 % CAVs, 120 s (seed 1). With the default gain
     c2_gamma = 0.5 1/s the flock lags its time-gap reference in stop-and-go, the safety

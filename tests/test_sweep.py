@@ -281,6 +281,7 @@ def _results(out: Path) -> pd.DataFrame:
 
 
 @pytest.mark.sumo
+@pytest.mark.slow(seconds=7)
 def test_a_dying_worker_loses_no_finished_run_and_resume_completes(
     tmp_path, sumo_env, monkeypatch, capsys
 ):
@@ -363,6 +364,7 @@ network.circumference_m = 300.0
 
 
 @pytest.mark.sumo
+@pytest.mark.slow(seconds=7)
 def test_the_sweep_runs_on_a_local_dask_cluster(tmp_path, sumo_env):
     """LocalCluster with 2 worker processes; each run in a subprocess of a Dask worker."""
     pytest.importorskip("distributed")
@@ -540,6 +542,7 @@ def _log(path: Path) -> list[tuple[str, str, int, float]]:
 
 @pytest.mark.sumo
 @pytest.mark.parametrize("start_method", ["spawn", "forkserver"])
+@pytest.mark.slow(seconds=8)
 def test_killing_the_sweep_ends_its_workers_and_resume_runs_each_run_once(
     tmp_path, sumo_env, monkeypatch, start_method
 ):
@@ -668,6 +671,7 @@ def test_a_parameter_the_grid_points_kind_lacks_is_one_line(text, message):
         _plan(text)
 
 
+@pytest.mark.slow(seconds=7)
 def test_a_sweep_of_two_kinds_fills_each_kinds_parameter_column(tmp_path, sumo_env):
     f = _write(tmp_path, KINDS_SWEEP)
     out = tmp_path / "out"
