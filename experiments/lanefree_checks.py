@@ -21,8 +21,9 @@ speeds U(25, 35) m/s on the ring):
 ``width_drop/cavNN``      10.2 m, a 70 m taper, 6.8 m from 430 to 700 m (``WIDTH_DROP``);
                           8 000 veh/h; 100, 60 and 0 % CAVs (0 %: SUMO's own drivers on
                           the same road); 600 s
-``onramp/cavNN``          1.5 km road, merge at 500 m, 3 000 + 1 500 veh/h (ramp); 100 and
-                          50 % CAVs; 600 s
+``onramp/cavNN``          1.5 km road, merge at 500 m onto a 250 m acceleration lane,
+                          3 000 + 1 500 veh/h (ramp); 100 and 50 % CAVs, and SUMO's
+                          drivers alone (0 %: the set-up's own check); 600 s
 ``free_road/cav100``      1 km x 10.2 m, 3 000 veh/h, 100 % CAVs; 600 s
 ``lateral/kNNN``          the TUM ring at 40, 120 and 225 veh/km, 100 % CAVs, one seed,
                           trajectories every 1 s: the lateral figures
@@ -127,10 +128,12 @@ def arms() -> dict[str, dict]:
         if pct == 0:
             o["controller.kind"] = "sumo"
         out[f"width_drop/cav{pct}"] = o
-    for pct in (100, 50):
+    for pct in (100, 50, 0):
         o = _open(1500.0, 3000.0, pct / 100.0, (600.0, 1400.0), [400.0, 700.0])
         o.update({"network.kind": "onramp", "network.merge_position_m": 500.0,
                   "demand.ramp_inflow_vph": 1500.0})
+        if pct == 0:
+            o["controller.kind"] = "sumo"
         out[f"onramp/cav{pct}"] = o
     out["free_road/cav100"] = _open(1000.0, 3000.0, 1.0, (100.0, 900.0), [500.0])
     for k in LATERAL_DENSITIES_VPKM:

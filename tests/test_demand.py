@@ -165,7 +165,8 @@ def test_lateral_departures_stay_on_the_road(straight: RoadNetwork, tmp_path: Pa
 
 def test_onramp_demand_has_ramp_vehicles(cache: Path, tmp_path: Path) -> None:
     net = build_network(
-        NetworkSpec(kind="onramp", length_m=400.0, merge_position_m=150.0, ramp_length_m=100.0),
+        NetworkSpec(kind="onramp", length_m=400.0, merge_position_m=150.0, ramp_length_m=100.0,
+                    acceleration_lane_m=100.0),
         cache,
     )
     demand = DemandSpec(inflow_vph=1800.0, ramp_inflow_vph=600.0)

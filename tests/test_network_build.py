@@ -201,7 +201,9 @@ def test_vehicles_cross_the_joints_of_a_split_road_unchanged(cache: Path, tmp_pa
 
 
 def test_onramp_offsets_increase_along_the_main_route(cache: Path) -> None:
-    spec = NetworkSpec(kind="onramp", length_m=400.0, merge_position_m=150.0, ramp_length_m=100.0)
+    """Without an acceleration lane: the ramp's lane joins the road's in the junction."""
+    spec = NetworkSpec(kind="onramp", length_m=400.0, merge_position_m=150.0, ramp_length_m=100.0,
+                       acceleration_lane_m=0.0, ramp_width_m=0.0)
     net = build_network(spec, cache)
     assert net.main_route == ("main_up", "main_down")
     assert net.ramp_route == ("ramp", "main_down")
@@ -219,7 +221,7 @@ def test_onramp_offsets_increase_along_the_main_route(cache: Path) -> None:
     # ramp_length_m is SUMO's length along the ramp (its lane and junction lane) ...
     assert net.ramp_length_m == pytest.approx(
         sumo_net.getLane("ramp_0").getLength() + sumo_net.getLane(ramp_via).getLength())
-    assert net.ramp_width_m == pytest.approx(spec.width_m)  # default: as wide as the road
+    assert net.ramp_width_m == pytest.approx(spec.width_m)  # 0: as wide as the road
     # ... while s and d place the ramp in the main road's frame: it starts 100 m x cos 8 deg
     # upstream of the merge node (at 150 m) and its centre lies right of the main road's
     # right edge (-5.1 m) by more than half its width until the junction.
@@ -233,8 +235,12 @@ def test_onramp_offsets_increase_along_the_main_route(cache: Path) -> None:
 
 
 @pytest.mark.sumo
-def test_onramp_vehicles_reach_the_end_with_continuous_s(cache: Path, tmp_path: Path) -> None:
-    spec = NetworkSpec(kind="onramp", length_m=400.0, merge_position_m=150.0, ramp_length_m=100.0)
+@pytest.mark.parametrize("acc_m", [0.0, 100.0])
+def test_onramp_vehicles_reach_the_end_with_continuous_s(cache: Path, tmp_path: Path,
+                                                         acc_m: float) -> None:
+    """With and without an acceleration lane (SUMO's driver changes off it)."""
+    spec = NetworkSpec(kind="onramp", length_m=400.0, merge_position_m=150.0, ramp_length_m=100.0,
+                       acceleration_lane_m=acc_m)
     net = build_network(spec, cache)
     rou = tmp_path / "onramp.rou.xml"
     rou.write_text(
@@ -251,7 +257,8 @@ def test_onramp_vehicles_reach_the_end_with_continuous_s(cache: Path, tmp_path: 
         import libsumo as t
         from cosim.road import NetworkSpec, build_network
         net = build_network(NetworkSpec(kind="onramp", length_m=400.0, merge_position_m=150.0,
-                                        ramp_length_m=100.0), {str(cache)!r})
+                                        ramp_length_m=100.0, acceleration_lane_m={acc_m}),
+                            {str(cache)!r})
         t.start(["sumo", "-n", str(net.net_file), "-r", {str(rou)!r}, "--no-step-log", "true",
                  "--lateral-resolution", "0.8", "--step-length", "0.1"])
         prev, worst, lanes, arrived, last_s = {{}}, {{}}, {{}}, [], {{}}
@@ -283,10 +290,44 @@ def test_onramp_vehicles_reach_the_end_with_continuous_s(cache: Path, tmp_path: 
         assert "main_down_0" in out["lanes"][v]
         assert any(lane.startswith(":merge") for lane in out["lanes"][v])
     assert "ramp_0" in out["lanes"]["r"]
+    if acc_m:
+        assert "acc_0" in out["lanes"]["r"] and "acc_1" in out["lanes"]["r"]
+
+
+def test_acceleration_lane_lies_beside_the_road_in_the_frame(cache: Path) -> None:
+    """The acceleration lane (``acc_0``, 3.4 m) is a second lane of edge ``acc`` right of
+    the road's lane ``acc_1``, which stays on the reference line (d = 0, as the lanes
+    before and after it); the road's right edge steps out by 3.4 m from the merge
+    junction's start to the lane's end and back across the junction after it; the ramp
+    ends on the acceleration lane, and ``merge_s_m`` is where the road is one lane again."""
+    spec = NetworkSpec(kind="onramp", length_m=600.0, merge_position_m=200.0,
+                       ramp_length_m=100.0, acceleration_lane_m=150.0)
+    net = build_network(spec, cache)
+    assert net.main_route == ("main_up", "acc", "main_down")
+    assert net.ramp_route == ("ramp", "acc", "main_down")
+    assert net.n_lanes == 1  # the sublane model stays on
+    for lane in ("main_up_0", "acc_1", "main_down_0"):
+        assert net.lane_d[lane] == pytest.approx(0.0, abs=1e-9)
+    assert net.lane_d["acc_0"] == pytest.approx(-5.1 - 1.7, abs=1e-9)
+    assert net.lane_width["acc_0"] == pytest.approx(3.4)
+    assert {"acc_0", "acc_1"} <= set(net.main_lanes)
+    spans = {e: (a, b) for e, a, b in net.edge_spans}
+    up_end, (acc0, acc1), down0 = spans["main_up"][1], spans["acc"], spans["main_down"][0]
+    right, left = net.edges_at(np.array([100.0, up_end + 0.01, acc0, 0.5 * (acc0 + acc1),
+                                         acc1, 0.5 * (acc1 + down0), down0 + 1.0]))
+    assert np.allclose(left, 5.1, atol=0.02)
+    assert right[0] == pytest.approx(-5.1, abs=0.02)
+    assert np.allclose(right[1:5], -8.5, atol=0.02)  # paved from the junction's start
+    assert -8.5 < right[5] < -5.1  # across the junction after the lane's end
+    assert right[6] == pytest.approx(-5.1, abs=0.02)
+    assert net.merge_s_m == pytest.approx(net.lane_offsets["main_down"])
+    s, d = net.lane_frame(["ramp_0"], np.array([net.ramp_length_m]), np.zeros(1))
+    assert d[0] < -5.1
 
 
 def test_locate_inverts_s_of(cache: Path) -> None:
-    spec = NetworkSpec(kind="onramp", length_m=400.0, merge_position_m=150.0, ramp_length_m=100.0)
+    spec = NetworkSpec(kind="onramp", length_m=400.0, merge_position_m=150.0, ramp_length_m=100.0,
+                       acceleration_lane_m=0.0)
     net = build_network(spec, cache)
     (_, a0, a1), (_, b0, b1) = net.edge_spans
     for s in (0.0, 0.5 * (a0 + a1), a1, b0, 0.5 * (b0 + b1), net.length_m):

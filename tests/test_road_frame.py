@@ -386,7 +386,13 @@ def _sumo_case(name: str, folder: Path, steps: int = 400, dt: float = 0.1) -> di
            "worst_command_m": 0.0, "n_commanded": 0, "worst_edge_m": 0.0,
            "ramp_samples": 0, "ramp_max_d_minus_right_m": -math.inf, "seen_on": {}}
     commanded: dict[str, tuple] = {}
-    widths = {f"{e}_0": t.lane.getWidth(f"{e}_0") for e in route}
+    # SUMO's borders of each main-route lane's edge, in that lane's lateral coordinate (m):
+    # right of the rightmost lane, left of the leftmost (an acceleration lane beside)
+    borders = {}
+    for e in route:
+        ws = [t.lane.getWidth(f"{e}_{i}") for i in range(t.edge.getLaneNumber(e))]
+        for i, w in enumerate(ws):
+            borders[f"{e}_{i}"] = (-0.5 * w - sum(ws[:i]), 0.5 * w + sum(ws[i + 1:]))
     for step in range(steps):
         t.simulationStep()
         ids = list(t.vehicle.getIDList())
@@ -416,12 +422,12 @@ def _sumo_case(name: str, folder: Path, steps: int = 400, dt: float = 0.1) -> di
         right, left = rn.edges_at(s)
         # our road edges against SUMO's lane borders, for vehicles on the main road's
         # lanes: how far the body reaches beyond the edge, in our frame and in SUMO's
-        on_lane = np.array([x in widths for x in lanes], dtype=bool)
+        on_lane = np.array([x in borders for x in lanes], dtype=bool)
         if on_lane.any():
-            half = np.array([widths.get(x, 0.0) for x in lanes])[on_lane] / 2.0
+            b = np.array([borders.get(x, (0.0, 0.0)) for x in lanes])[on_lane]
             ours = np.maximum(right[on_lane] - (d[on_lane] - 0.9),
                               (d[on_lane] + 0.9) - left[on_lane])
-            theirs = np.maximum(-half - (lat[on_lane] - 0.9), (lat[on_lane] + 0.9) - half)
+            theirs = np.maximum(b[:, 0] - (lat[on_lane] - 0.9), (lat[on_lane] + 0.9) - b[:, 1])
             e = np.abs(ours - theirs)
             if e.max() > out["worst_edge_m"]:
                 out["worst_edge_m"] = float(e.max())

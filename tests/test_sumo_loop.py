@@ -96,6 +96,25 @@ def test_lateral_position_command_lands_exactly_next_step(world_case):
     assert r["max_jump"] > 5.0
 
 
+def test_cav_crosses_between_lanes_of_an_acceleration_lane(world_case):
+    """Commanded across the border between the acceleration lane and the road (edge acc),
+    back and across again, the CAV is on the lane that holds its commanded centre every
+    step (SUMO's drivers see it there) and reads back at the commanded d (1e-6 m); it
+    leaves the acceleration lane's end on the road, not stopped at it."""
+    r = world_case("acceleration_lane")
+    rows, border = r["rows"], r["border"]
+    assert len(rows) >= 100
+    for d_cmd, d, lane, _ in rows:
+        assert d == pytest.approx(d_cmd, abs=1e-6)
+        if lane.startswith("acc_"):
+            assert lane == ("acc_1" if d_cmd > border else "acc_0"), (d_cmd, lane)
+    lanes = [lane for *_, lane, _ in rows]
+    crossings = sum(a != b for a, b in zip(lanes[:-1], lanes[1:], strict=True)
+                    if not a.startswith(":"))
+    assert crossings >= 3
+    assert "main_down_0" in lanes and rows[-1][3] > r["acc_end_s"]
+
+
 # --------------------------------------------------------------------------------------
 # 3-4. Boundary violations and collisions
 # --------------------------------------------------------------------------------------

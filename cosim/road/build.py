@@ -12,7 +12,9 @@ Geometry conventions (all lengths in m, speeds in m/s):
 * Lane-free roads have ONE wide lane per edge; SUMO's sublane model
   (``--lateral-resolution``) lets vehicles sit anywhere across it.
 * Every generated edge uses ``spreadType="center"``: the edge's centre line is the
-  road's centre line, and consecutive edges of different widths share it.
+  road's centre line, and consecutive edges of different widths share it. The one
+  exception, the on-ramp's acceleration lane, is a second lane beside the road (see
+  :func:`_sources_onramp_acceleration_lane`).
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ from cosim.road.spec import RING_ARC_POINTS, RING_EDGES, NetworkSpec, _n_edges
 from cosim.sumo.binaries import netconvert_binary, sumo_version
 
 #: Bump when the generated geometry changes, so old cache entries are not reused.
-BUILDER_VERSION = 3
+BUILDER_VERSION = 4
 
 
 #: Relative tolerance between the requested ring circumference and SUMO's lane length.
@@ -103,12 +105,18 @@ def _node(nid: str, x: float, y: float, ntype: str = "priority") -> str:
 def _edge(
     eid: str, frm: str, to: str, width: float, speed: float,
     lanes: int = 1, priority: int = 2, shape: str | None = None,
+    spread: str = "center", lane_widths: Sequence[float] = (),
 ) -> str:
+    """One edge line; ``lane_widths`` (right to left, m) gives each lane its own width."""
     shape_attr = f' shape="{shape}"' if shape else ""
-    return (
+    head = (
         f'    <edge id="{eid}" from="{frm}" to="{to}" numLanes="{lanes}" width="{width:.3f}"'
-        f' speed="{speed:.3f}" priority="{priority}" spreadType="center"{shape_attr}/>'
+        f' speed="{speed:.3f}" priority="{priority}" spreadType="{spread}"{shape_attr}'
     )
+    if not lane_widths:
+        return head + "/>"
+    body = [f'        <lane index="{i}" width="{w:.3f}"/>' for i, w in enumerate(lane_widths)]
+    return "\n".join([head + ">", *body, "    </edge>"])
 
 
 def _sources_straight(spec: NetworkSpec) -> _Sources:
@@ -165,6 +173,8 @@ def _sources_ring(spec: NetworkSpec) -> _Sources:
 
 
 def _sources_onramp(spec: NetworkSpec) -> _Sources:
+    if spec.acceleration_lane_m > 0:
+        return _sources_onramp_acceleration_lane(spec)
     v = spec.speed_limit_mps
     th = math.radians(spec.ramp_angle_deg)
     m = spec.merge_position_m
@@ -191,6 +201,50 @@ def _sources_onramp(spec: NetworkSpec) -> _Sources:
     )
     return _Sources(nodes, edges, ("main_up", "main_down"), ramp_route=("ramp", "main_down"),
                     connections=connections)
+
+
+def _sources_onramp_acceleration_lane(spec: NetworkSpec) -> _Sources:
+    """The on-ramp with an acceleration lane (:attr:`NetworkSpec.acceleration_lane_m`).
+
+    Main route ``main_up, acc, main_down``; edge ``acc`` has two lanes, ``acc_0`` (the
+    acceleration lane, ``ramp_width_m`` wide, right) and ``acc_1`` (the road, in line
+    with ``main_up_0`` and ``main_down_0``); ``acc_0`` has no connection onward, so it
+    ends where ``acc`` does. The ramp (route ``ramp, acc, main_down``) meets ``acc_0`` at
+    the ramp's angle. The streams never share a junction lane: ramp traffic crosses onto
+    the road along the acceleration lane (SUMO's drivers change lanes; our CAVs cross
+    where the law takes them, :meth:`SumoRoadWorld.apply`). The main road's edges spread
+    their lanes to the right of a line drawn along the road's left edge (``y = width/2``),
+    so the added lane leaves the road's centre line (the road frame's reference line,
+    which follows the lanes the road continues on) straight at ``y = 0``.
+    """
+    v = spec.speed_limit_mps
+    w, wr = spec.width_m, spec.ramp_width_m or spec.width_m
+    th = math.radians(spec.ramp_angle_deg)
+    m, acc_end = spec.merge_position_m, spec.merge_position_m + spec.acceleration_lane_m
+    top = 0.5 * w  # the main road's left edge: its edges are drawn here
+    ye = -0.5 * w - 0.5 * wr  # the acceleration lane's centre
+    rx, ry = m - spec.ramp_length_m * math.cos(th), ye - spec.ramp_length_m * math.sin(th)
+    nodes = [
+        _node("start", 0.0, top, "dead_end"),
+        _node("merge", m, top, "priority"),
+        _node("acc_end", acc_end, top, "priority"),
+        _node("end", spec.length_m, top, "dead_end"),
+        _node("ramp_start", rx, ry, "dead_end"),
+    ]
+    edges = [
+        _edge("main_up", "start", "merge", w, v, spread="right"),
+        _edge("acc", "merge", "acc_end", w, v, lanes=2, spread="right", lane_widths=(wr, w)),
+        _edge("main_down", "acc_end", "end", w, v, spread="right"),
+        _edge("ramp", "ramp_start", "merge", wr, v, priority=1,
+              shape=f"{rx:.3f},{ry:.3f} {m:.3f},{ye:.3f}"),
+    ]
+    connections = (
+        '    <connection from="main_up" to="acc" fromLane="0" toLane="1"/>',
+        '    <connection from="ramp" to="acc" fromLane="0" toLane="0"/>',
+        '    <connection from="acc" to="main_down" fromLane="1" toLane="0"/>',
+    )
+    return _Sources(nodes, edges, ("main_up", "acc", "main_down"),
+                    ramp_route=("ramp", "acc", "main_down"), connections=connections)
 
 
 def _sources_varying(spec: NetworkSpec) -> _Sources:

@@ -38,7 +38,9 @@ The road's edges along ``s`` (:meth:`RoadNetwork.profile`): the outer borders of
 main route's lanes (right border of the rightmost, left border of the leftmost), in the
 frame, sampled every :data:`SAMPLE_M`; across a junction they run linearly from the
 borders where one edge's lanes end to where the next edge's begin (the junction's
-paved area). Right and left edges are independent (asymmetric roads are fine). The
+paved area; where an edge adds a lane beside the road, e.g. an on-ramp's acceleration
+lane, the added lane's border holds from the junction's start). Right and left edges
+are independent (asymmetric roads are fine). The
 profile is piecewise constant: flat stretches are one piece each, and where an edge
 moves the pieces are short enough that it moves by at most :data:`PROFILE_TOL_M` within
 one; each piece takes the narrower value (the road is never wider than SUMO's).
@@ -409,6 +411,7 @@ class RoadNetwork:
         lane_d: ``d`` (m) of each route lane's centre at its middle (0 for the one
             wide lane of a generated road; +-3.4 m for the outer lanes of three_lane;
             a user's narrow lane after a width change may be off-centre).
+        lane_width: width (m) of each route lane.
         segment_s0, segment_width: the profile's pieces: start ``s`` (m) and width (m).
         edge_spans: ``(edge, s_start, s_end)`` of every main-route edge's lanes, m.
 
@@ -432,6 +435,7 @@ class RoadNetwork:
     n_lanes: int = 1
     lane_offsets: Mapping[str, float] = field(default_factory=dict, repr=False, compare=False)
     lane_d: Mapping[str, float] = field(default_factory=dict, repr=False, compare=False)
+    lane_width: Mapping[str, float] = field(default_factory=dict, repr=False, compare=False)
     segment_s0: tuple[float, ...] = field(default=(0.0,), repr=False, compare=False)
     segment_width: tuple[float, ...] = field(default=(10.2,), repr=False, compare=False)
     edge_spans: tuple[tuple[str, float, float], ...] = field(
@@ -746,10 +750,11 @@ def _route_lanes(net: Any, route: Sequence[str], periodic: bool, main: bool,
     return out
 
 
-def _centre_shape(edge: Any) -> np.ndarray:
+def _centre_shape(edge: Any, lanes: Sequence[Any] | None = None) -> np.ndarray:
     """Centre line of an edge's lanes as SUMO lays them out: the middle lane's centre (an
-    even count: the border between the two middle lanes), (V, 2) m."""
-    lanes = _lanes_of(edge)
+    even count: the border between the two middle lanes), (V, 2) m. ``lanes``: only
+    these (adjacent) lanes of the edge, e.g. the ones the road continues on."""
+    lanes = list(lanes) if lanes else _lanes_of(edge)
     mid = lanes[len(lanes) // 2]
     shape = _dedupe(np.asarray(mid.getShape(), dtype=float)[:, :2])
     if len(lanes) % 2 == 0:  # the right border of the left middle lane
@@ -757,10 +762,20 @@ def _centre_shape(edge: Any) -> np.ndarray:
     return shape
 
 
+def _continuing_lanes(prev: Any, edge: Any) -> list[Any] | None:
+    """The lanes of ``edge`` that the lanes of ``prev`` lead onto, right to left, when
+    they are not all of them (a lane added beside the road, e.g. an acceleration lane);
+    else None."""
+    reached = {c.getToLane().getID() for c in _connections(prev, edge.getID())}
+    lanes = [ln for ln in _lanes_of(edge) if ln.getID() in reached]
+    return lanes if lanes and len(lanes) < len(_lanes_of(edge)) else None
+
+
 def _reference_line(net: Any, route: Sequence[str], periodic: bool) -> _Line:
     """The reference line (see the module docstring), as a polyline.
 
-    Each route edge contributes its lanes' centre line (:func:`_centre_shape`), moved
+    Each route edge contributes its lanes' centre line (:func:`_centre_shape`; of the
+    lanes the previous edge's lanes lead onto, when a lane is added beside them), moved
     sideways by ``shift = delta_0 - delta_k`` where ``delta_k`` is how far that centre
     lies from the edge as drawn (its raw shape) and ``delta_0`` the same for the first
     edge. Between two unshifted edges the line runs along the junction lanes SUMO drives
@@ -773,8 +788,8 @@ def _reference_line(net: Any, route: Sequence[str], periodic: bool) -> _Line:
     edges = [net.getEdge(e) for e in route]
     centres, shifts = [], []
     delta0 = None
-    for edge in edges:
-        centre = _centre_shape(edge)
+    for k, edge in enumerate(edges):
+        centre = _centre_shape(edge, _continuing_lanes(edges[k - 1], edge) if k else None)
         raw = _raw_shape(edge, centre)
         if len(raw) < 2 or len(centre) < 2:
             raise NetworkError(f"route edge {edge.getID()!r} has no length")
@@ -1132,9 +1147,15 @@ def _profile(tb: _Tables, lanes: list[_LaneGeo], net: Any, route: Sequence[str],
              periodic: bool, length: float):
     """The road's edges along ``s``: pieces (s0, right, left) and the edges' spans."""
     s_all, r_all, l_all, spans = [], [], [], []
-    for eid in route:
+    for k, eid in enumerate(route):
         ks = [tb.index[ln.getID()] for ln in _lanes_of(net.getEdge(eid))]
         s, r, left = _edge_borders(tb, lanes, ks, eid, periodic, length)
+        if k and s_all and _continuing_lanes(net.getEdge(route[k - 1]), net.getEdge(eid)):
+            # a lane added beside the road (an on-ramp's acceleration lane) is paved from
+            # the junction's start: the ramp's junction lane leads onto it there
+            s = np.concatenate([[s_all[-1][-1] + 1e-3], s])
+            r = np.concatenate([[min(r[0], r_all[-1][-1])], r])
+            left = np.concatenate([[max(left[0], l_all[-1][-1])], left])
         ref = tb.index[eid]
         s_ref, _ = _frame_of(tb, np.array([ref, ref]), np.array([0.0, tb.lane_len[ref]]),
                              np.zeros(2))
@@ -1274,6 +1295,7 @@ def _road_network(path: Path, net: Any, kind: str, main_route: Sequence[str],
         n_lanes=len(_lanes_of(net.getEdge(main_route[0]))),
         lane_offsets=offsets,
         lane_d=lane_d,
+        lane_width={g.lane_id: float(g.width) for g in lanes},
         segment_s0=tuple(float(x) for x in s0),
         segment_width=tuple(float(x) for x in widths),
         edge_spans=tuple(spans),

@@ -27,6 +27,10 @@ RING_ARC_POINTS = 16
 CONVENTIONAL_LANE_WIDTH_M = 3.4
 
 
+#: Shortest main-road edge after an on-ramp's acceleration lane, m.
+MIN_EDGE_AFTER_LANE_M = 20.0
+
+
 @dataclass(frozen=True)
 class NetworkSpec:
     """Parameters of a road network (lengths and widths in m, speeds in m/s).
@@ -40,14 +44,19 @@ class NetworkSpec:
         ramp_length_m: straight-line distance from the ramp's start to the merge
             node; SUMO's measured ramp length is reported in
             :attr:`RoadNetwork.ramp_length_m` (the junction takes its share).
-        ramp_width_m: width of the ramp's single lane, m; 0 (the default): as wide as the
-            main road. SUMO keeps a vehicle's lateral offset from the lane's centre line
-            when it crosses a junction onto a lane of another width, so traffic from a
-            narrow ramp would join the wide lane-free road in its middle; on a ramp as
-            wide as the road, ramp traffic (which departs at the ramp's right side) joins
-            at the road's right side, as on a real on-ramp.
+        ramp_width_m: width of the ramp's single lane, m (default 3.4, one conventional
+            lane); 0: as wide as the main road. With an acceleration lane it is also that
+            lane's width.
         ramp_angle_deg: angle between ramp and main road at the merge, degrees.
         merge_position_m: distance from the main road's start to the merge node.
+        acceleration_lane_m: length (m) of the acceleration lane: from the merge node the
+            ramp's lane runs on beside the main road's right edge, as a second lane of
+            the same edge (the road is ``width_m + ramp_width_m`` wide there), and ends;
+            ramp traffic crosses onto the main road anywhere along it. Default 250.
+            0: no acceleration lane; the ramp's lane and the road's lane join in the
+            merge junction (SUMO then keeps both streams in one file through the
+            junction's lanes, whatever their lateral positions: a bottleneck of the
+            set-up, README "On-ramp").
         width_profile: varying_width only: consecutive ``(length_m, width_m)``
             segments, one edge each, in driving order.
         speed_limit_mps: speed limit on every edge.
@@ -67,9 +76,10 @@ class NetworkSpec:
     width_m: float = 10.2
     circumference_m: float = 1000.0
     ramp_length_m: float = 300.0
-    ramp_width_m: float = 0.0
+    ramp_width_m: float = CONVENTIONAL_LANE_WIDTH_M
     ramp_angle_deg: float = 8.0
     merge_position_m: float = 500.0
+    acceleration_lane_m: float = 250.0
     width_profile: tuple[tuple[float, float], ...] = ()
     speed_limit_mps: float = 40.0
     max_edge_length_m: float = 100.0
@@ -140,6 +150,16 @@ class NetworkSpec:
                 f"network.merge_position_m must be in (0, length_m={self.length_m}) "
                 f"(got {self.merge_position_m})"
             )
+        acc = self.acceleration_lane_m
+        if isinstance(acc, bool) or not isinstance(acc, int | float) or not math.isfinite(acc) \
+                or acc < 0:
+            raise ConfigError(f"network.acceleration_lane_m must be >= 0 (got {acc!r})")
+        if acc > 0 and self.merge_position_m + acc + MIN_EDGE_AFTER_LANE_M > self.length_m:
+            raise ConfigError(
+                f"network.acceleration_lane_m = {acc:g} m does not fit: the lane must end at "
+                f"least {MIN_EDGE_AFTER_LANE_M:g} m before the road's end (merge_position_m "
+                f"+ acceleration_lane_m <= {self.length_m - MIN_EDGE_AFTER_LANE_M:g} m)"
+            )
 
     def _validate_varying(self) -> None:
         if not self.width_profile:
@@ -177,7 +197,7 @@ class NetworkSpec:
             "ring": ("circumference_m", "width_m", "max_edge_length_m"),
             "onramp": (
                 "length_m", "width_m", "ramp_length_m", "ramp_width_m",
-                "ramp_angle_deg", "merge_position_m",
+                "ramp_angle_deg", "merge_position_m", "acceleration_lane_m",
             ),
             "varying_width": ("width_profile",),
             "file": ("net_file", "route_edges", "ramp_edges"),

@@ -54,6 +54,27 @@ def _vars():
     return _VARS
 
 
+def _side_lanes(net: RoadNetwork) -> dict[str, list[tuple[str, float, float, float]]]:
+    """Lane id -> spans ``(lane, d_right, d_left, length)`` (m) of every lane of its edge,
+    for the main route's edges that have more than one lane (see ``_cross_lanes``)."""
+    by_edge: dict[str, list[str]] = {}
+    for lane in net.lane_width:
+        edge = lane.rsplit("_", 1)[0]
+        if not lane.startswith(":") and edge in net.main_route:
+            by_edge.setdefault(edge, []).append(lane)
+    tb = net.tables
+    out = {}
+    for lanes in by_edge.values():
+        if len(lanes) < 2:
+            continue
+        spans = []
+        for lane in lanes:
+            d, half = net.lane_d[lane], 0.5 * net.lane_width[lane]
+            spans.append((lane, d - half, d + half, float(tb.lane_len[tb.index[lane]])))
+        out.update({lane: spans for lane in lanes})
+    return out
+
+
 #: SUMO's default lane-change mode (all its lane-change motivations on).
 SUMO_DEFAULT_LANE_CHANGE_MODE = 1621
 
@@ -135,6 +156,10 @@ class SumoWorld:
         #: 0), so they join the road at the ramp's right side where they departed;
         #: released to their own driver model (or our law) on the main road
         self._on_ramp: set[str] = set()
+        #: lanes of the main route's edges with more than one lane (an acceleration lane,
+        #: three_lane): lane id -> [(lane id, d of its right border, d of its left
+        #: border, length)] of every lane of its edge (m), for crossing between them
+        self._side_lanes = _side_lanes(net)
 
     def _is_main(self, lane: str) -> bool:
         edge = lane.rsplit("_", 1)[0] if not lane.startswith(":") else lane
@@ -290,12 +315,40 @@ class SumoWorld:
         v_next = np.asarray(v_next, dtype=float)
         # road-frame d -> lateral lane position where the vehicle will be after the step
         lats = self.net.lateral_lane_position(lanes, pos + v_next * self.dt, d_next)
+        if self._side_lanes:
+            self._cross_lanes(ids, lanes, pos, v_next, d_next, lats)
         set_speed, set_lat = self._setters(veh)
         for vid, v, lat in zip(ids, v_next.tolist(), lats.tolist(), strict=True):
             set_speed(vid, v)
             set_lat(vid, lat)
         self.v_lat_state.update(zip(ids, np.asarray(v_lat_next, dtype=float).tolist(),
                                     strict=True))
+
+    def _cross_lanes(self, ids: list, lanes: list, pos: np.ndarray, v_next: np.ndarray,
+                     d_next: np.ndarray, lats: np.ndarray) -> None:
+        """Move CAVs whose commanded centre ``d_next`` (m) lies on another lane of their
+        edge onto that lane (``moveTo`` at their position now; SUMO keeps the speed and
+        advances them in the step), and rewrite their lateral lane positions ``lats`` (m)
+        in place. A lateral lane position beyond the lane's border would leave the
+        vehicle on its old lane in SUMO's eyes: drawn across the border, unseen by the
+        drivers on the neighbouring lane, and stopped at the old lane's end."""
+        side = self._side_lanes
+        for i, lane in enumerate(lanes):
+            spans = side.get(lane)
+            if spans is None:
+                continue
+            d = float(d_next[i])
+            here = next(sp for sp in spans if sp[0] == lane)
+            if here[1] <= d <= here[2]:
+                continue
+            target = min(spans, key=lambda sp: max(sp[1] - d, d - sp[2], 0.0))
+            if target[0] == lane:
+                continue
+            p = min(float(pos[i]) * target[3] / here[3], target[3] - 1e-3)
+            self.ts.vehicle.moveTo(ids[i], target[0], p)
+            self._lane_of[ids[i]] = target[0]
+            lats[i] = self.net.lateral_lane_position(
+                [target[0]], np.array([p + float(v_next[i]) * self.dt]), np.array([d]))[0]
 
     def _setters(self, veh):
         """``(setSpeed, setLateralLanePosition)``: libsumo's C functions when running

@@ -305,6 +305,40 @@ def case_start_error() -> dict:
     return {"raised": None, "message": ""}
 
 
+def case_acceleration_lane() -> dict:
+    """A CAV on an on-ramp's acceleration lane (edge ``acc``: lane 0 the acceleration lane,
+    lane 1 the road) commanded across the lane border, back, and across again: where SUMO
+    has it (lane) and where it reads back (d) each step."""
+    net = build_network(NetworkSpec(kind="onramp", length_m=600.0, merge_position_m=200.0,
+                                    ramp_length_m=100.0, acceleration_lane_m=200.0))
+    path = WORKDIR / "acc.rou.xml"
+    path.write_text("\n".join([
+        "<routes>", VTYPE, '<route id="r" edges="acc main_down"/>',
+        '<vehicle id="cav.0" type="cav_t" route="r" depart="0" departLane="0" departPos="10" '
+        'departSpeed="15" departPosLat="0" insertionChecks="none"/>', "</routes>"]) + "\n")
+    world = SumoWorld(net, ["-r", str(path), *SUMO_OPTS])
+    world.start()
+    world.step()
+    world.take_over(["cav.0"])
+    d0 = net.lane_d["acc_0"]
+    targets = [*np.linspace(d0, 2.0, 30), *np.linspace(2.0, d0, 30), *np.linspace(d0, 0.0, 20),
+               *[0.0] * 80]
+    rows = []
+    va = world.observe()
+    for d in targets:
+        _command(world, va, {"cav.0": 15.0}, {"cav.0": float(d)})
+        world.step()
+        va = world.observe()
+        if "cav.0" not in va.ids:
+            break
+        rows.append((float(d), float(va.d[0]), world.ts.vehicle.getLaneID("cav.0"),
+                     float(va.s[0])))
+    border = d0 + 0.5 * net.lane_width["acc_0"]
+    world.close()
+    return {"rows": rows, "border": border, "acc_end_s": dict(
+        (e, s1) for e, _, s1 in net.edge_spans)["acc"]}
+
+
 CASES = {
     "kinematics": case_kinematics,
     "lateral": case_lateral,
@@ -312,6 +346,7 @@ CASES = {
     "collision": case_collision,
     "ring": case_ring,
     "start_error": case_start_error,
+    "acceleration_lane": case_acceleration_lane,
 }
 
 if __name__ == "__main__":
