@@ -96,6 +96,19 @@ def test_lateral_position_command_lands_exactly_next_step(world_case):
     assert r["max_jump"] > 5.0
 
 
+def test_lateral_move_across_a_joint_moves_the_whole_vehicle(world_case):
+    """A CAV whose back is still on the previous edge moves 3 m sideways: it reads back at
+    every command (1e-9 m), and SUMO, which keeps a lateral position for the back's lane,
+    sees the back move too: no collision with a CAV that creeps up beside its old place
+    (with setLateralLanePosition alone SUMO reported 54 steps of collision here)."""
+    r = world_case("lateral_across_joint")
+    assert r["d_a"] == pytest.approx(-1.0)
+    assert r["straddled_steps"] > 100
+    assert r["front_a"] > 100.0 and 99.0 <= r["front_b"] < 100.0  # side by side at the joint
+    assert r["max_err"] < 1e-9
+    assert r["collisions"] == 0
+
+
 def test_cav_crosses_between_lanes_of_an_acceleration_lane(world_case):
     """Commanded across the border between the acceleration lane and the road (edge acc),
     back and across again, the CAV is on the lane that holds its commanded centre every

@@ -75,6 +75,12 @@ def _side_lanes(net: RoadNetwork) -> dict[str, list[tuple[str, float, float, flo
     return out
 
 
+#: Lateral speed (m/s) and acceleration (m/s^2) bounds given to controlled CAVs' SL2015
+#: model, far beyond any command, so that ``changeSublane`` moves them as asked in one step.
+SUBLANE_MOVE_MAX_MPS = 1000.0
+SUBLANE_MOVE_MAX_MPS2 = 1.0e6
+
+
 #: SUMO's default lane-change mode (all its lane-change motivations on).
 SUMO_DEFAULT_LANE_CHANGE_MODE = 1621
 
@@ -267,6 +273,9 @@ class SumoWorld:
         if self._on_ramp:
             self._release_ramp()
         self._pos_of = dict(zip(ids, pos_l, strict=True))
+        # vehicles whose back is still on the lane before (see _straddling in apply)
+        back_behind = np.flatnonzero(pos < length)
+        self._straddle_lat = {ids[i]: float(lat[i]) for i in back_behind.tolist()}
         # (lane, position, lateral position) -> (s, d): the lanes' real geometry
         s_front, d_front = self.net.lane_frame(lane, pos, lat)
         s = s_front - 0.5 * length
@@ -296,12 +305,26 @@ class SumoWorld:
                 continue
             veh.setSpeedMode(vid, 0)
             veh.setLaneChangeMode(vid, 0)
+            # a lateral move requested with changeSublane lands in full in the step
+            veh.setMaxSpeedLat(vid, SUBLANE_MOVE_MAX_MPS)
+            veh.setParameter(vid, "laneChangeModel.lcAccelLat", str(SUBLANE_MOVE_MAX_MPS2))
             self.controlled.add(vid)
             self.v_lat_state.setdefault(vid, 0.0)
 
     def apply(self, ids: list, v_next: np.ndarray, d_next: np.ndarray,
               v_lat_next: np.ndarray) -> None:
         """Command next speeds (m/s) and lateral positions (road frame, m) of CAVs.
+
+        A CAV whose back is still on the lane before its front's (it straddles a joint of
+        edges or a junction lane) moves sideways with ``changeSublane`` instead of
+        ``setLateralLanePosition``: SUMO keeps a lateral position per lane the vehicle's
+        back occupies, set when the front left that lane, and only its lane changer moves
+        them; ``setLateralLanePosition`` moves the front alone, so SUMO's drivers and its
+        collision check would see the back where the vehicle was when it crossed the joint
+        (a CAV that moved 1.8 m sideways while creeping across a joint collided, in SUMO's
+        eyes, with a vehicle beside its old place: tests/test_sumo_loop.py). Both land
+        exactly: the CAVs' lane changer may move them up to
+        :data:`SUBLANE_MOVE_MAX_MPS` sideways, with no lateral acceleration bound.
 
         Every CAV gets both setters every step (``setSpeed`` persists in SUMO, so skipping
         an unchanged one would be exact, but benchmarks/bench_floor.py measured 1 %: not
@@ -318,9 +341,13 @@ class SumoWorld:
         if self._side_lanes:
             self._cross_lanes(ids, lanes, pos, v_next, d_next, lats)
         set_speed, set_lat = self._setters(veh)
+        straddle = self._straddle_lat
         for vid, v, lat in zip(ids, v_next.tolist(), lats.tolist(), strict=True):
             set_speed(vid, v)
-            set_lat(vid, lat)
+            if vid in straddle:
+                veh.changeSublane(vid, lat - straddle[vid])
+            else:
+                set_lat(vid, lat)
         self.v_lat_state.update(zip(ids, np.asarray(v_lat_next, dtype=float).tolist(),
                                     strict=True))
 

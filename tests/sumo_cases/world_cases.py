@@ -305,6 +305,42 @@ def case_start_error() -> dict:
     return {"raised": None, "message": ""}
 
 
+def case_lateral_across_joint() -> dict:
+    """CAV A creeps across the joint of two 100 m edges and, stopped with its back still on
+    the first edge, moves 3 m to the right; CAV B then creeps up beside where A was. Every
+    step: A's lateral command against SUMO's read-back, and SUMO's collisions."""
+    net = build_network(NetworkSpec(kind="straight", length_m=200.0, max_edge_length_m=100.0))
+    path = WORKDIR / "joint.rou.xml"
+    path.write_text("\n".join([
+        "<routes>", VTYPE, '<route id="r" edges="main0 main1"/>',
+        *(f'<vehicle id="{v}" type="cav_t" route="r" depart="0" departPos="{p}" '
+          'departSpeed="0" departPosLat="2.0" insertionChecks="none"/>'
+          for v, p in (("cav.A", 99.0), ("cav.B", 90.0))), "</routes>"]) + "\n")
+    world = SumoWorld(net, ["-r", str(path), *SUMO_OPTS])
+    world.start()
+    world.step()
+    world.take_over(["cav.A", "cav.B"])
+    va = world.observe()
+    d_a, errs, collisions, straddled = 2.0, [], [], 0
+    for k in range(170):
+        s = dict(zip(va.ids, va.s_front.tolist(), strict=True))
+        v_a = 1.0 if k < 40 and s["cav.A"] < 102.0 else 0.0
+        if k >= 40:
+            d_a = max(-1.0, d_a - 0.1)
+        v_b = 1.0 if k > 50 and s["cav.B"] < 99.5 else 0.0
+        straddled += int("cav.A" in world._straddle_lat)
+        _command(world, va, {"cav.A": v_a, "cav.B": v_b}, {"cav.A": d_a, "cav.B": 2.0})
+        world.step()
+        va = world.observe()
+        collisions += world.collisions()
+        errs.append(abs(float(va.d[list(va.ids).index("cav.A")]) - d_a))
+    s_front = dict(zip(va.ids, va.s_front.tolist(), strict=True))
+    world.close()
+    return {"max_err": float(max(errs)), "collisions": len(collisions), "d_a": d_a,
+            "straddled_steps": straddled, "front_a": s_front["cav.A"],
+            "front_b": s_front["cav.B"]}
+
+
 def case_acceleration_lane() -> dict:
     """A CAV on an on-ramp's acceleration lane (edge ``acc``: lane 0 the acceleration lane,
     lane 1 the road) commanded across the lane border, back, and across again: where SUMO
@@ -347,6 +383,7 @@ CASES = {
     "ring": case_ring,
     "start_error": case_start_error,
     "acceleration_lane": case_acceleration_lane,
+    "lateral_across_joint": case_lateral_across_joint,
 }
 
 if __name__ == "__main__":
