@@ -46,7 +46,10 @@ class NetworkSpec:
             :attr:`RoadNetwork.ramp_length_m` (the junction takes its share).
         ramp_width_m: width of the ramp's single lane, m (default 3.4, one conventional
             lane); 0: as wide as the main road. With an acceleration lane it is also that
-            lane's width.
+            lane's width. Without one (``acceleration_lane_m = 0``) a ramp narrower than
+            the road joins it in its middle (SUMO keeps a vehicle's offset from the lane's
+            centre line across a junction): use 0 there, so that ramp traffic, which
+            departs at the ramp's right side, joins at the road's right side.
         ramp_angle_deg: angle between ramp and main road at the merge, degrees.
         merge_position_m: distance from the main road's start to the merge node.
         acceleration_lane_m: length (m) of the acceleration lane: from the merge node the

@@ -29,7 +29,8 @@ before issue 15's speed-ups (the numba kernels matched it bit for bit); runs rec
 for the prefix-stable demand and calibrated human drivers, and for the zipper and
 held-driver rules of the lane-free law and the safety layer's in-band rule; everything
 recorded again for the lane-free law's congestion rules (hysteresis, announced moves and
-rows in dense traffic).
+rows in dense traffic); runs recorded again when CAVs straddling a joint started to move
+sideways with changeSublane (cosim/sumo/world.py).
 """
 
 from __future__ import annotations
