@@ -86,8 +86,10 @@ def test_plane_reproduction_command_writes_outputs(tmp_path, name):
 @pytest.mark.slow(seconds=9)
 def test_shipped_sweep_smoke_runs_every_point_ok(tmp_path, sweep):
     out = tmp_path / sweep
+    # forkserver: each run forks from a server with cosim imported (spawn, the default,
+    # imports it again per run: about 1 s each; both are tested in test_sweep.py)
     _run([sys.executable, "-m", "cosim.cli.main", "sweep", sweep, "--smoke", "--out", str(out),
-          "--quiet"], timeout=900.0)
+          "--quiet", "--start-method", "forkserver"], timeout=900.0)
     rows = pd.read_csv(out / "results.csv")
     assert len(rows) >= 1
     assert (rows["status"] == "ok").all(), rows[["run_id", "status"]].to_string()

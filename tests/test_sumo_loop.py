@@ -109,6 +109,18 @@ def test_lateral_move_across_a_joint_moves_the_whole_vehicle(world_case):
     assert r["collisions"] == 0
 
 
+def test_sumo_driver_sees_a_cav_reaching_over_from_the_acceleration_lane(world_case):
+    """A CAV on the acceleration lane whose body reaches 0.5 m over onto the road's lane is
+    a leader for the SUMO driver coming up behind it there: the driver slows to the CAV's
+    8 m/s, keeps a gap and never touches it (moved with setLateralLanePosition, the CAV
+    was invisible: the driver sped up to 35 m/s through it)."""
+    r = world_case("overhang_seen")
+    assert r["d_a"] == pytest.approx(r["d_target"], abs=1e-6)
+    assert r["collisions"] == 0
+    assert r["min_gap"] > 2.0
+    assert r["v_b_max"] < 25.0 and r["v_b_end"] < 10.0
+
+
 def test_cav_crosses_between_lanes_of_an_acceleration_lane(world_case):
     """Commanded across the border between the acceleration lane and the road (edge acc),
     back and across again, the CAV is on the lane that holds its commanded centre every

@@ -273,9 +273,13 @@ class SumoWorld:
         if self._on_ramp:
             self._release_ramp()
         self._pos_of = dict(zip(ids, pos_l, strict=True))
-        # vehicles whose back is still on the lane before (see _straddling in apply)
-        back_behind = np.flatnonzero(pos < length)
-        self._straddle_lat = {ids[i]: float(lat[i]) for i in back_behind.tolist()}
+        # vehicles to move sideways with changeSublane (see apply): the back still on the
+        # lane before, or on an edge of several lanes; their lateral lane positions now
+        sublane = pos < length
+        if self._side_lanes:
+            side = self._side_lanes
+            sublane |= np.fromiter((ln in side for ln in lane), dtype=bool, count=n)
+        self._sublane_lat = {ids[i]: float(lat[i]) for i in np.flatnonzero(sublane).tolist()}
         # (lane, position, lateral position) -> (s, d): the lanes' real geometry
         s_front, d_front = self.net.lane_frame(lane, pos, lat)
         s = s_front - 0.5 * length
@@ -315,15 +319,21 @@ class SumoWorld:
               v_lat_next: np.ndarray) -> None:
         """Command next speeds (m/s) and lateral positions (road frame, m) of CAVs.
 
-        A CAV whose back is still on the lane before its front's (it straddles a joint of
-        edges or a junction lane) moves sideways with ``changeSublane`` instead of
-        ``setLateralLanePosition``: SUMO keeps a lateral position per lane the vehicle's
-        back occupies, set when the front left that lane, and only its lane changer moves
-        them; ``setLateralLanePosition`` moves the front alone, so SUMO's drivers and its
-        collision check would see the back where the vehicle was when it crossed the joint
-        (a CAV that moved 1.8 m sideways while creeping across a joint collided, in SUMO's
-        eyes, with a vehicle beside its old place: tests/test_sumo_loop.py). Both land
-        exactly: the CAVs' lane changer may move them up to
+        Two kinds of CAV move sideways with ``changeSublane`` instead of
+        ``setLateralLanePosition``, because only SUMO's lane changer keeps its bookkeeping
+        of where a vehicle's body is (tests/test_sumo_loop.py):
+
+        * a CAV whose back is still on the lane before its front's (it straddles a joint of
+          edges or a junction lane): SUMO keeps a lateral position per lane the back
+          occupies, set when the front left that lane; ``setLateralLanePosition`` moves the
+          front alone, so SUMO's drivers and collision check would see the back where the
+          vehicle was when it crossed the joint;
+        * a CAV on an edge of several lanes (an on-ramp's acceleration lane): a body that
+          reaches over the lane's border is seen by the drivers of the next lane only
+          through the "shadow lane" the lane changer sets; moved there by
+          ``setLateralLanePosition`` it is invisible to them.
+
+        Both land exactly: the CAVs' lane changer may move them up to
         :data:`SUBLANE_MOVE_MAX_MPS` sideways, with no lateral acceleration bound.
 
         Every CAV gets both setters every step (``setSpeed`` persists in SUMO, so skipping
@@ -341,11 +351,11 @@ class SumoWorld:
         if self._side_lanes:
             self._cross_lanes(ids, lanes, pos, v_next, d_next, lats)
         set_speed, set_lat = self._setters(veh)
-        straddle = self._straddle_lat
+        sublane = self._sublane_lat
         for vid, v, lat in zip(ids, v_next.tolist(), lats.tolist(), strict=True):
             set_speed(vid, v)
-            if vid in straddle:
-                veh.changeSublane(vid, lat - straddle[vid])
+            if vid in sublane:
+                veh.changeSublane(vid, lat - sublane[vid])
             else:
                 set_lat(vid, lat)
         self.v_lat_state.update(zip(ids, np.asarray(v_lat_next, dtype=float).tolist(),
@@ -374,6 +384,9 @@ class SumoWorld:
             p = min(float(pos[i]) * target[3] / here[3], target[3] - 1e-3)
             self.ts.vehicle.moveTo(ids[i], target[0], p)
             self._lane_of[ids[i]] = target[0]
+            # placed with setLateralLanePosition in this step (changeSublane right after
+            # moveTo does not land); from the next step on it moves with changeSublane
+            self._sublane_lat.pop(ids[i], None)
             lats[i] = self.net.lateral_lane_position(
                 [target[0]], np.array([p + float(v_next[i]) * self.dt]), np.array([d]))[0]
 

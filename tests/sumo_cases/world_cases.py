@@ -328,7 +328,7 @@ def case_lateral_across_joint() -> dict:
         if k >= 40:
             d_a = max(-1.0, d_a - 0.1)
         v_b = 1.0 if k > 50 and s["cav.B"] < 99.5 else 0.0
-        straddled += int("cav.A" in world._straddle_lat)
+        straddled += int("cav.A" in world._sublane_lat)
         _command(world, va, {"cav.A": v_a, "cav.B": v_b}, {"cav.A": d_a, "cav.B": 2.0})
         world.step()
         va = world.observe()
@@ -339,6 +339,46 @@ def case_lateral_across_joint() -> dict:
     return {"max_err": float(max(errs)), "collisions": len(collisions), "d_a": d_a,
             "straddled_steps": straddled, "front_a": s_front["cav.A"],
             "front_b": s_front["cav.B"]}
+
+
+def case_overhang_seen() -> dict:
+    """CAV A (8 m/s) on the acceleration lane moves sideways until its body reaches 0.5 m
+    over the border onto the road's lane; a SUMO driver B (SL2015, kept in its lateral
+    place) comes up behind on the road's lane at 20 m/s, its body overlapping A's by 0.1 m
+    laterally. B's speed and the gap to A, every step."""
+    net = build_network(NetworkSpec(kind="onramp", length_m=1500.0))
+    path = WORKDIR / "overhang.rou.xml"
+    path.write_text("\n".join([
+        "<routes>", VTYPE,
+        '<vType id="hdv_t" length="4.5" width="1.8" minGap="2.5" sigma="0" tau="1.3" '
+        'laneChangeModel="SL2015" latAlignment="arbitrary"/>',
+        '<route id="r" edges="acc main_down"/>',
+        '<vehicle id="cav.A" type="cav_t" route="r" depart="0" departLane="0" departPos="100" '
+        'departSpeed="8" departPosLat="0" insertionChecks="none"/>',
+        '<vehicle id="hdv.B" type="hdv_t" route="r" depart="0" departLane="1" departPos="40" '
+        'departSpeed="20" departPosLat="-3.7" insertionChecks="none"/>', "</routes>"]) + "\n")
+    world = SumoWorld(net, ["-r", str(path), *SUMO_OPTS])
+    world.start()
+    world.step()
+    world.take_over(["cav.A"])
+    world.ts.vehicle.setLaneChangeMode("hdv.B", 0)
+    d0 = net.lane_d["acc_0"]
+    d_target = -0.5 * net.lane_width["acc_1"] + 0.5 - 0.5 * CAR_W  # 0.5 m over the border
+    va = world.observe()
+    gaps, speeds, collisions = [], [], 0
+    for k in range(90):
+        world.apply(["cav.A"], np.array([8.0]),
+                    np.array([min(d_target, d0 + 0.2 * k)]), np.zeros(1))
+        world.step()
+        va = world.observe()
+        collisions += len(world.collisions())
+        ia, ib = list(va.ids).index("cav.A"), list(va.ids).index("hdv.B")
+        gaps.append(float(va.s[ia] - va.s[ib] - 0.5 * (va.length[ia] + va.length[ib])))
+        speeds.append(float(va.v[ib]))
+    d_a = float(va.d[ia])
+    world.close()
+    return {"min_gap": min(gaps), "v_b_end": speeds[-1], "v_b_max": max(speeds),
+            "collisions": collisions, "d_a": d_a, "d_target": d_target}
 
 
 def case_acceleration_lane() -> dict:
@@ -384,6 +424,7 @@ CASES = {
     "start_error": case_start_error,
     "acceleration_lane": case_acceleration_lane,
     "lateral_across_joint": case_lateral_across_joint,
+    "overhang_seen": case_overhang_seen,
 }
 
 if __name__ == "__main__":
