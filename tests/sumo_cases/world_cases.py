@@ -305,6 +305,16 @@ def case_start_error() -> dict:
     return {"raised": None, "message": ""}
 
 
+def _world_on(net, routes: Path, cavs: list[str]) -> SumoWorld:
+    """A started world on ``net`` with the route file ``routes``, one step in, ``cavs``
+    taken over."""
+    world = SumoWorld(net, ["-r", str(routes), *SUMO_OPTS])
+    world.start()
+    world.step()
+    world.take_over(cavs)
+    return world
+
+
 def case_lateral_across_joint() -> dict:
     """CAV A creeps across the joint of two 100 m edges and, stopped with its back still on
     the first edge, moves 3 m to the right; CAV B then creeps up beside where A was. Every
@@ -316,10 +326,7 @@ def case_lateral_across_joint() -> dict:
         *(f'<vehicle id="{v}" type="cav_t" route="r" depart="0" departPos="{p}" '
           'departSpeed="0" departPosLat="2.0" insertionChecks="none"/>'
           for v, p in (("cav.A", 99.0), ("cav.B", 90.0))), "</routes>"]) + "\n")
-    world = SumoWorld(net, ["-r", str(path), *SUMO_OPTS])
-    world.start()
-    world.step()
-    world.take_over(["cav.A", "cav.B"])
+    world = _world_on(net, path, ["cav.A", "cav.B"])
     va = world.observe()
     d_a, errs, collisions, straddled = 2.0, [], [], 0
     for k in range(170):
@@ -357,10 +364,7 @@ def case_overhang_seen() -> dict:
         'departSpeed="8" departPosLat="0" insertionChecks="none"/>',
         '<vehicle id="hdv.B" type="hdv_t" route="r" depart="0" departLane="1" departPos="40" '
         'departSpeed="20" departPosLat="-3.7" insertionChecks="none"/>', "</routes>"]) + "\n")
-    world = SumoWorld(net, ["-r", str(path), *SUMO_OPTS])
-    world.start()
-    world.step()
-    world.take_over(["cav.A"])
+    world = _world_on(net, path, ["cav.A"])
     world.ts.vehicle.setLaneChangeMode("hdv.B", 0)
     d0 = net.lane_d["acc_0"]
     d_target = -0.5 * net.lane_width["acc_1"] + 0.5 - 0.5 * CAR_W  # 0.5 m over the border
@@ -392,10 +396,7 @@ def case_acceleration_lane() -> dict:
         "<routes>", VTYPE, '<route id="r" edges="acc main_down"/>',
         '<vehicle id="cav.0" type="cav_t" route="r" depart="0" departLane="0" departPos="10" '
         'departSpeed="15" departPosLat="0" insertionChecks="none"/>', "</routes>"]) + "\n")
-    world = SumoWorld(net, ["-r", str(path), *SUMO_OPTS])
-    world.start()
-    world.step()
-    world.take_over(["cav.0"])
+    world = _world_on(net, path, ["cav.0"])
     d0 = net.lane_d["acc_0"]
     targets = [*np.linspace(d0, 2.0, 30), *np.linspace(2.0, d0, 30), *np.linspace(d0, 0.0, 20),
                *[0.0] * 80]
