@@ -59,6 +59,10 @@ import bench_floor as bf  # noqa: E402  (the floor variant and the case, not cop
 
 PHASES = ("advance", "observe", "reference", "control", "constrain", "safety", "integrate",
           "apply", "record")
+#: Variants, interleaved in rounds: SUMO alone, the floor of issue 15, the floor with the
+#: take-over cosim uses (CAVs' SUMO action step 1 s), cosim with its CAVs' action step of
+#: one step (the path before, ``scenario.cav_action_step_s = 0.1``) and cosim as run.
+VARIANTS = ("sumo", "floor", "floor.1s", "cosim.0.1s", "cosim")
 SCALE_N = (100, 500, 1000, 2000)
 SCALE_LENGTH_M = 10000.0
 SCALE_SKIP = 20  # steps left out of the per-vehicle-step figures (start, first calls)
@@ -172,6 +176,11 @@ def run_variant(case, name: str, duration_s: float) -> dict:
         return bf.run_variant(case, "a")
     if name == "floor":
         return bf.run_variant(case, "e")
+    if name == "floor.1s":
+        return bf.run_variant(case, "e.asl")
+    if name == "cosim.0.1s":
+        return run_cosim("default", {**cosim_overrides(duration_s),
+                                     "scenario.cav_action_step_s": bf.STEP_S})
     return run_cosim("default", cosim_overrides(duration_s))
 
 
@@ -182,19 +191,21 @@ def _ratio(res: dict, num: str, den: str) -> float:
 def print_main(res: dict) -> None:
     what = {"sumo": "sumo binary, SUMO drives everyone",
             "floor": "libsumo floor (bench_floor e)",
+            "floor.1s": "floor, CAV action step 1 s (bench_floor e.asl)",
+            "cosim.0.1s": "cosim, CAV action step 0.1 s (the path before)",
             "cosim": "cosim: run_scenario, flocking + safety + metrics"}
-    print(f"\n{'variant':<8}{'what':<50}{'CPU s':>7}{'/ sumo':>8}{'/ floor':>8}{'proc s':>8}"
-          f"{'veh-steps':>10}{'us/veh-step':>12}")
-    print("-" * 111)
-    for n in ("sumo", "floor", "cosim"):
+    print(f"\n{'variant':<11}{'what':<50}{'CPU s':>7}{'/ sumo':>8}{'/ floor':>8}"
+          f"{'/ f.1s':>8}{'proc s':>8}{'veh-steps':>10}{'us/veh-step':>12}")
+    print("-" * 122)
+    for n in VARIANTS:
         rows = res[n]
         cpu = bf._med([r["cpu_s"] for r in rows])
         src = rows if n != "sumo" else res["floor"]  # the binary carries the same traffic
         vs = bf._med([r.get("veh_steps") for r in src])
         us = 1e6 * cpu / vs if vs and math.isfinite(vs) else float("nan")
-        print(f"{n:<8}{what[n]:<50}{cpu:7.2f}{_ratio(res, n, 'sumo'):8.2f}"
-              f"{_ratio(res, n, 'floor'):8.2f}{bf._med([r['proc_s'] for r in rows]):8.2f}"
-              f"{vs:10.0f}{us:12.2f}")
+        print(f"{n:<11}{what[n]:<50}{cpu:7.2f}{_ratio(res, n, 'sumo'):8.2f}"
+              f"{_ratio(res, n, 'floor'):8.2f}{_ratio(res, n, 'floor.1s'):8.2f}"
+              f"{bf._med([r['proc_s'] for r in rows]):8.2f}{vs:10.0f}{us:12.2f}")
 
 
 def print_phases(res: dict) -> None:
@@ -276,7 +287,7 @@ def bench(ns) -> int:
           f"resolution {bf.BASE_RES_M:g} m, collision.action warn, seed {bf.SEED}; {rounds} "
           f"interleaved round(s); SUMO {sumo_version()}, Python {sys.version.split()[0]}; "
           f"{os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}", flush=True)
-    names = ["sumo", "floor", "cosim"]
+    names = list(VARIANTS)
     with tempfile.TemporaryDirectory(prefix="bench_cosim_") as tmp:
         os.environ.setdefault("COSIM_NETWORK_CACHE", str(Path(tmp) / "nets"))
         case = bf.Case(Path(tmp), duration)

@@ -31,6 +31,11 @@ Variants (libsumo ones drive it directly, no cosim code in the child):
          both every step), with every setter called every step, or a setter skipped
          when its value did not change (speed equal to the last ``setSpeed`` of that
          vehicle; |d_next - d| <= 1e-6 m);
+* ``e.asl`` the floor with the take-over of ``cosim`` (``scenario.cav_action_step_s`` = 1 s):
+         the CAVs' SUMO action step is 1 s (SUMO runs their lane changer and car-following
+         plan once a second instead of every step), and ``setPreviousSpeed(v_next)`` before
+         ``setSpeed(v_next)`` (with an action step above the step, SUMO moves a vehicle by
+         ``(v + v_next) dt / 2``; the exactness runs show both with and without it);
 * ``h.*`` the floor (e) at lateral resolution 0.4 / 0.8 / 1.6 m, on 100 m edges (the
          default, ``network.max_edge_length_m = 100``) and on one 2 km edge (0);
          ``e.nocoll``: (e) with SUMO's collision check off (the sweeps' setting).
@@ -130,11 +135,15 @@ VARIANTS: dict[str, tuple[str, dict]] = {
     "h.0.8/2km": ("(e) at 0.8 m, one 2 km edge", _v(**FLOOR, res=0.8, edge=0.0)),
     "h.1.6/2km": ("(e) at 1.6 m, one 2 km edge", _v(**FLOOR, res=1.6, edge=0.0)),
     "e.nocoll": ("(e) with --collision.action none", _v(**FLOOR, coll="none")),
+    "e.asl": ("(e), CAV action step 1 s, setPreviousSpeed",
+              _v(**{**FLOOR, "lon": "prev+setSpeed"}, asl=1.0)),
 }
 
 # Exactness runs: name -> child settings (pattern "exact": every CAV varies speed and d).
 EXACT: dict[str, dict] = {
     "setSpeed": _v(**FLOOR),
+    "setSpeed, action step 1 s": _v(**FLOOR, asl=1.0),
+    "setPreviousSpeed + setSpeed, 1 s": _v(**{**FLOOR, "lon": "prev+setSpeed"}, asl=1.0),
     "slowDown(v, dt)": _v(**{**FLOOR, "lon": "slowDown"}),
     "setAcceleration(a, dt)": _v(**{**FLOOR, "lon": "setAcceleration"}),
     "setPreviousSpeed(v)": _v(**{**FLOOR, "lon": "setPreviousSpeed"}),
@@ -181,6 +190,7 @@ def child_run(p: dict) -> dict:
     c0, w0 = clock(), time.perf_counter()
     ls.start(p["cmd"])
     veh, sim, step = ls.vehicle, ls.simulation, ls.simulationStep
+    asl = p.get("asl")  # action step (s) of the CAVs taken over (None: one step)
     e0 = next(iter(offsets))  # a main edge: check that x = s (front) and y = d on this road
     x0, y0 = sim.convert2D(e0, 10.0, 0)
     if abs(x0 - (offsets[e0] + 10.0)) > 1e-6 or abs(y0) > 1e-6:
@@ -215,6 +225,8 @@ def child_run(p: dict) -> dict:
                 if getType(vid).startswith("cav"):
                     setSM(vid, 0)
                     setLCM(vid, 0)
+                    if asl:
+                        veh.setActionStepLength(vid, asl, True)
                     if hold0:  # keep the departure speed (held until the next setSpeed)
                         setSpeed(vid, getSpeed(vid))
                     ctrl[vid] = n_ord
@@ -298,6 +310,11 @@ def child_run(p: dict) -> dict:
                     for vid, _, _, _, _, vn, _ in cmds:
                         last_v[vid] = vn
                 calls["lon"] += len(cmds)
+        elif lon == "prev+setSpeed":  # this step's speed too: (v + v_next) / 2 = v_next
+            for vid, _, _, _, _, vn, _ in cmds:
+                setPrev(vid, vn)
+                setSpeed(vid, vn)
+            calls["lon"] += 2 * len(cmds)
         elif lon == "slowDown":
             for vid, _, _, _, _, vn, _ in cmds:
                 slowDown(vid, vn, dt)

@@ -116,3 +116,19 @@ def test_sumo_run_matches_reference(tmp_path):
     root = str(Path(__file__).resolve().parents[1])
     got = rx._run_child("traj", "sumo_obstacle", root, tmp_path)
     _compare_run("sumo_obstacle", got)
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("scen", ["obstacle", "ring", "onramp"])
+def test_cav_action_step_leaves_cav_motion_unchanged(scen, tmp_path):
+    """With only CAVs on the road, SUMO's action step for CAVs (one step or 1 s) changes
+    nothing of their motion: every state and command is bit-identical (with 1 s SUMO moves
+    a CAV by (v + v_next) dt / 2, made v_next dt by setPreviousSpeed; changeSublane moves
+    are made in steps where the CAV acts)."""
+    root = str(Path(__file__).resolve().parents[1])
+    every, slow = (rx._run_child("traj", f"{scen}_asl_{a:g}", root, tmp_path) for a in (0.1, 1.0))
+    assert every["inserted"] == slow["inserted"] > 10
+    for part in ("states", "cmds"):
+        a, b = every[part], slow[part]
+        assert [(k, ids) for k, ids, _ in a] == [(k, ids) for k, ids, _ in b], part
+        assert all(np.array_equal(x, y) for (_, _, x), (_, _, y) in zip(a, b, strict=True)), part

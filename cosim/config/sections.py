@@ -41,6 +41,13 @@ def _finite(section: str, obj, *names: str, low: float | None = None, strict: bo
             raise ConfigError(f"{section}.{name} must be a finite number{rel}, got {v!r}")
 
 
+#: Longest SUMO action step for CAVs, s. SUMO plans a vehicle's way over the next lanes
+#: (its links at joints and junctions) in its action steps; with 10 s the plan ran out
+#: before the next one and SUMO stopped CAVs at a lane's end (bench_floor.py exactness,
+#: 2026-12-01), with 1 s every commanded move landed exactly.
+MAX_CAV_ACTION_STEP_S = 1.0
+
+
 @dataclass(frozen=True)
 class RunSpec:
     """[scenario]: time, seed and world.
@@ -60,6 +67,16 @@ class RunSpec:
         world: "sumo" (SUMO's road and drivers, the default) or "road" (the SUMO-free
             road world of :mod:`cosim.sim.road_world`: the same road frame, double
             integrators, non-CAVs driven by a plain IDM: for law studies and tests).
+        cav_action_step_s: SUMO's action step for the CAVs it no longer steers, s, from
+            ``step_length_s`` to :data:`MAX_CAV_ACTION_STEP_S`. SUMO runs a vehicle's own
+            decisions (lane changer, car-following plan) once per action step; our law
+            overrules them every step, so a longer one only saves SUMO's work (its step
+            costs about a third at 1 s: benchmarks/bench_floor.py). CAVs move the same
+            either way (bit-identical: tests/test_sumo_loop.py). One difference: above
+            ``step_length_s``, SUMO's drivers planning a step read a CAV's speed as the
+            one it moves at in that step (``v_next``) instead of the last step's
+            (:meth:`cosim.sumo.world.SumoWorld.apply`). Equal to ``step_length_s``: the
+            path before (every CAV decided by SUMO each step, then overruled).
     """
 
     name: str = "default"
@@ -71,6 +88,7 @@ class RunSpec:
     lateral_resolution_m: float = 0.8
     interval_s: float = 60.0
     world: str = "sumo"
+    cav_action_step_s: float = 1.0
 
     def __post_init__(self) -> None:
         if not _NAME.match(self.name):
@@ -104,6 +122,14 @@ class RunSpec:
             )
         if self.interval_s < self.step_length_s:
             raise ConfigError("scenario.interval_s must be at least one step_length_s")
+        _finite("scenario", self, "cav_action_step_s", low=0.0, strict=True)
+        if not (self.step_length_s - 1e-9 <= self.cav_action_step_s
+                <= MAX_CAV_ACTION_STEP_S + 1e-9):
+            raise ConfigError(
+                f"scenario.cav_action_step_s = {self.cav_action_step_s:g} s must lie between "
+                f"scenario.step_length_s ({self.step_length_s:g} s) and "
+                f"{MAX_CAV_ACTION_STEP_S:g} s"
+            )
         if self.world not in WORLDS:
             raise ConfigError(f"scenario.world must be one of {', '.join(WORLDS)}, "
                               f"got {self.world!r}")

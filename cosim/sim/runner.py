@@ -164,7 +164,7 @@ def build_world(sc: Scenario, work: Path, gui: bool = False):
                                     work / "detectors.add.xml", run.interval_s, work / "sumo")
         args += ["-a", str(detectors.path)]
     world = SumoWorld(net, args, dt=run.step_length_s, desired=routes.desired_speed_mps,
-                      gui=gui)
+                      gui=gui, cav_action_step_s=run.cav_action_step_s)
     return world, net, plan, detectors
 
 

@@ -125,13 +125,22 @@ class SumoWorld:
         desired: desired speed (m/s) per vehicle id (from the demand plan).
         cav_prefix: vType id prefix that marks CAVs.
         gui: run ``sumo-gui`` through TraCI instead of libsumo.
+        cav_action_step_s: SUMO's action step for controlled CAVs, s (``scenario.
+            cav_action_step_s``; None: one step). SUMO runs a vehicle's own decisions (its
+            lane changer, its car-following plan) once per action step; our law overrules
+            both every step, so a longer one only saves SUMO's work. Above one step SUMO
+            moves such a vehicle by ``(v + v_next) dt / 2`` instead of ``v_next dt``:
+            :meth:`apply` makes the two equal.
     """
 
     def __init__(self, net: RoadNetwork, sumo_args: list[str], dt: float = 0.1,
                  desired: dict | None = None, cav_prefix: str = "cav",
-                 gui: bool = False) -> None:
+                 gui: bool = False, cav_action_step_s: float | None = None) -> None:
         self.net = net
         self.dt = float(dt)
+        self.cav_action_step_s = max(float(cav_action_step_s or dt), self.dt)
+        #: the CAVs act less often than every step (setPreviousSpeed needed, see apply)
+        self._slow_actions = self.cav_action_step_s > self.dt + 1e-9
         self.road = net.profile()
         self.speed_limit_mps = float(net.speed_limit_mps)
         self.desired = dict(desired or {})
@@ -166,6 +175,8 @@ class SumoWorld:
         #: three_lane): lane id -> [(lane id, d of its right border, d of its left
         #: border, length)] of every lane of its edge (m), for crossing between them
         self._side_lanes = _side_lanes(net)
+        #: controlled CAVs given an action step of one step (see _act_every_step)
+        self._every_step: set[str] = set()
 
     def _is_main(self, lane: str) -> bool:
         edge = lane.rsplit("_", 1)[0] if not lane.startswith(":") else lane
@@ -312,6 +323,8 @@ class SumoWorld:
             # a lateral move requested with changeSublane lands in full in the step
             veh.setMaxSpeedLat(vid, SUBLANE_MOVE_MAX_MPS)
             veh.setParameter(vid, "laneChangeModel.lcAccelLat", str(SUBLANE_MOVE_MAX_MPS2))
+            if self._slow_actions:
+                veh.setActionStepLength(vid, self.cav_action_step_s, True)
             self.controlled.add(vid)
             self.v_lat_state.setdefault(vid, 0.0)
 
@@ -336,7 +349,15 @@ class SumoWorld:
         Both land exactly: the CAVs' lane changer may move them up to
         :data:`SUBLANE_MOVE_MAX_MPS` sideways, with no lateral acceleration bound.
 
-        Every CAV gets both setters every step (``setSpeed`` persists in SUMO, so skipping
+        Longitudinal: ``setSpeed(v_next)``, preceded by ``setPreviousSpeed(v_next)`` when
+        the CAVs' action step is longer than a step: SUMO then moves a CAV by
+        ``(v + v_next) dt / 2``; with its speed at the start of the step set to ``v_next``
+        too, that is exactly
+        ``v_next dt``, the semi-implicit Euler step of the loop (bench_floor.py's exactness
+        check, tests/test_sumo_loop.py). SUMO's drivers planning in that step read the CAV's
+        speed as ``v_next``, the speed it moves at in the step.
+
+        Every CAV gets every setter every step (``setSpeed`` persists in SUMO, so skipping
         an unchanged one would be exact, but benchmarks/bench_floor.py measured 1 %: not
         worth its bookkeeping); libsumo's functions are called directly, without the
         wrapper layer of its Python module (the same C++ calls).
@@ -350,9 +371,13 @@ class SumoWorld:
         lats = self.net.lateral_lane_position(lanes, pos + v_next * self.dt, d_next)
         if self._side_lanes:
             self._cross_lanes(ids, lanes, pos, v_next, d_next, lats)
-        set_speed, set_lat = self._setters(veh)
+        set_prev, set_speed, set_lat = self._setters(veh)
         sublane = self._sublane_lat
+        self._act_every_step(sublane)
+        slow = self._slow_actions
         for vid, v, lat in zip(ids, v_next.tolist(), lats.tolist(), strict=True):
+            if slow:
+                set_prev(vid, v)
             set_speed(vid, v)
             if vid in sublane:
                 veh.changeSublane(vid, lat - sublane[vid])
@@ -360,6 +385,24 @@ class SumoWorld:
                 set_lat(vid, lat)
         self.v_lat_state.update(zip(ids, np.asarray(v_lat_next, dtype=float).tolist(),
                                     strict=True))
+
+    def _act_every_step(self, sublane: dict) -> None:
+        """Give the CAVs that move with ``changeSublane`` this step an action step of one
+        step, and the others back ``cav_action_step_s``: SUMO's lane changer carries
+        out a ``changeSublane`` request in full only in a vehicle's action step. (The
+        position update does not change: with ``setPreviousSpeed`` both rules give
+        ``v_next dt``.)"""
+        every = self._every_step
+        if not self._slow_actions or (not sublane and not every):
+            return
+        want = self.controlled.intersection(sublane)
+        veh = self.ts.vehicle
+        for vid in every - want:
+            if vid in self.controlled:
+                veh.setActionStepLength(vid, self.cav_action_step_s, True)
+        for vid in want - every:
+            veh.setActionStepLength(vid, self.dt, True)
+        self._every_step = want
 
     def _cross_lanes(self, ids: list, lanes: list, pos: np.ndarray, v_next: np.ndarray,
                      d_next: np.ndarray, lats: np.ndarray) -> None:
@@ -391,13 +434,14 @@ class SumoWorld:
                 [target[0]], np.array([p + float(v_next[i]) * self.dt]), np.array([d]))[0]
 
     def _setters(self, veh):
-        """``(setSpeed, setLateralLanePosition)``: libsumo's C functions when running
-        libsumo, else the TraCI client's methods (sumo-gui)."""
+        """``(setPreviousSpeed, setSpeed, setLateralLanePosition)``: libsumo's C functions
+        when running libsumo, else the TraCI client's methods (sumo-gui)."""
         raw = getattr(self.ts, "_libsumo", None)
-        fast = (getattr(raw, "vehicle_setSpeed", None),
+        fast = (getattr(raw, "vehicle_setPreviousSpeed", None),
+                getattr(raw, "vehicle_setSpeed", None),
                 getattr(raw, "vehicle_setLateralLanePosition", None))
         if None in fast:
-            return veh.setSpeed, veh.setLateralLanePosition
+            return veh.setPreviousSpeed, veh.setSpeed, veh.setLateralLanePosition
         return fast
 
     def collisions(self) -> list[tuple[str, str]]:
