@@ -255,6 +255,8 @@ def test_vehicles_are_conserved(tmp_path, sumo_env):
     assert 15 <= r["n_routes"] <= 50
     assert s["vehicles_arrived"] >= 10
     _check_conservation(r)
+    # with SUMO's drivers on the road the CAVs act every step (scenario.cav_action_step_s)
+    assert r["sumo_cav_action_step_s"] == r["dt"]
 
 
 # --------------------------------------------------------------------------------------
@@ -288,6 +290,8 @@ def test_dense_cav_traffic_is_collision_free_and_stays_on_the_road(tmp_path, sum
     assert s["safety_agent_steps"] > 0
     _check_conservation(r)  # with vehicles not inserted this time
     assert s["vehicles_not_inserted"] > 0
+    # no SUMO driver on the road: the CAVs' SUMO action step is the configured 1 s
+    assert r["sumo_cav_action_step_s"] == 1.0
 
 
 AGGRESSIVE = {

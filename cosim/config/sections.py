@@ -68,15 +68,16 @@ class RunSpec:
             road world of :mod:`cosim.sim.road_world`: the same road frame, double
             integrators, non-CAVs driven by a plain IDM: for law studies and tests).
         cav_action_step_s: SUMO's action step for the CAVs it no longer steers, s, from
-            ``step_length_s`` to :data:`MAX_CAV_ACTION_STEP_S`. SUMO runs a vehicle's own
-            decisions (lane changer, car-following plan) once per action step; our law
-            overrules them every step, so a longer one only saves SUMO's work (its step
-            costs about a third at 1 s: benchmarks/bench_floor.py). CAVs move the same
-            either way (bit-identical: tests/test_sumo_loop.py). One difference: above
-            ``step_length_s``, SUMO's drivers planning a step read a CAV's speed as the
-            one it moves at in that step (``v_next``) instead of the last step's
-            (:meth:`cosim.sumo.world.SumoWorld.apply`). Equal to ``step_length_s``: the
-            path before (every CAV decided by SUMO each step, then overruled).
+            ``step_length_s`` to :data:`MAX_CAV_ACTION_STEP_S`, in runs whose demand has
+            no human drivers (with humans the CAVs act every step). SUMO runs a vehicle's
+            own decisions (lane changer, car-following plan) once per action step; our
+            law overrules them every step, so a longer one only saves SUMO's work (its
+            step costs about a third at 1 s: benchmarks/bench_floor.py), and the CAVs
+            move bit-identically (tests/test_exactness.py). With SUMO's drivers on the
+            road it is not used: they behave differently around CAVs that act once a
+            second (on the TUM ring with 10 % CAVs the flow fell by 11-14 %; cause in
+            SUMO not found). ``meta.json`` records the action step used
+            (``sumo_cav_action_step_s``).
     """
 
     name: str = "default"

@@ -52,6 +52,7 @@ from scipy.spatial import cKDTree
 
 from controllers.neighbours import tree_points
 from cosim.metrics.capacity import interval_drift, is_stationary
+from cosim.metrics.jams import align
 
 
 @dataclass
@@ -430,7 +431,8 @@ class TrafficRecorder:
         self.period = period
         self.rows: list[dict] = []
         self._acc: IntervalAccumulator | None = None
-        self._prev_front: dict = {}
+        self._prev_ids: list = []  # the last step's vehicles and their front positions (m)
+        self._prev_front = np.zeros(0)
         self._prev_overlaps: set = set()
         self._prev_sumo: set = set()
         self._shortfall = {"cav": [0.0, 0], "hdv": [0.0, 0]}  # sum (m/s), vehicle-steps
@@ -479,9 +481,14 @@ class TrafficRecorder:
                     self._shortfall[kind][1] += int(np.count_nonzero(sel))
 
         # Cross-section counts (front bumper passes x between steps).
-        front = dict(zip(st.ids, st.s_front, strict=True))
+        ids = list(st.ids)  # a copy: kept for the next step
         if acc is not None and len(self.xs):
-            prev = np.array([self._prev_front.get(k, np.nan) for k in st.ids])
+            idx = align(self._prev_ids, ids)  # None: the same vehicles in the same rows
+            if idx is None:
+                prev = self._prev_front
+            else:
+                prev = np.where(idx >= 0, self._prev_front[np.maximum(idx, 0)], np.nan) \
+                    if len(self._prev_front) else np.full(len(ids), np.nan)
             ok = ~np.isnan(prev)
             cur = st.s_front[ok]
             prv = prev[ok]
@@ -496,7 +503,8 @@ class TrafficRecorder:
             else:
                 for k, x in enumerate(self.xs):
                     acc.crossings[k] += int(np.count_nonzero((prv < x) & (cur >= x)))
-        self._prev_front = front
+        self._prev_ids = ids
+        self._prev_front = np.asarray(st.s_front, dtype=float)
 
         # Boundary violations (body outside the edges).
         excursion = np.maximum(

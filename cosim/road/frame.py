@@ -455,18 +455,20 @@ class RoadNetwork:
         get = self.tables.index.get
         return np.fromiter((get(x, -1) for x in lanes), dtype=np.int64, count=len(lanes))
 
-    def lane_frame(self, lanes: Sequence[str], pos_m: np.ndarray,
-                   lat_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def lane_frame(self, lanes: Sequence[str] | None, pos_m: np.ndarray,
+                   lat_m: np.ndarray, keys: np.ndarray | None = None
+                   ) -> tuple[np.ndarray, np.ndarray]:
         """Road-frame ``(s, d)`` (m, each (N,)) of N vehicles from SUMO's lane ids, lane
         positions ``pos_m`` (N,) m and lateral lane positions ``lat_m`` (N,) m.
 
         ``s`` is the position of the point SUMO reports (the front bumper's centre) along
         the reference line (wrapped on the ring), ``d`` its signed offset. Lanes off the
-        routes give ``s = NaN`` and ``d = lat``. Vectorised; lanes by dict lookup.
+        routes give ``s = NaN`` and ``d = lat``. Vectorised; lanes by dict lookup, or
+        ``keys`` (N,) = :meth:`lane_keys` of them when the caller has them already.
         """
         pos = np.asarray(pos_m, dtype=float)
         lat = np.asarray(lat_m, dtype=float)
-        k = self.lane_keys(lanes)
+        k = self.lane_keys(lanes) if keys is None else keys
         s = np.full(len(k), np.nan)
         d = lat.astype(float, copy=True)
         ok = k >= 0
@@ -476,17 +478,18 @@ class RoadNetwork:
             s[ok], d[ok] = _frame_of(self.tables, k[ok], pos[ok], lat[ok])
         return s, d
 
-    def lateral_lane_position(self, lanes: Sequence[str], pos_m: np.ndarray,
-                              d_m: np.ndarray) -> np.ndarray:
+    def lateral_lane_position(self, lanes: Sequence[str] | None, pos_m: np.ndarray,
+                              d_m: np.ndarray, keys: np.ndarray | None = None) -> np.ndarray:
         """SUMO lateral lane positions (N,) m that put vehicles now on ``lanes`` at
         road-frame offsets ``d_m`` (N,) m when they are at lane positions ``pos_m`` (N,) m
         (the inverse of :meth:`lane_frame`). Give the position a vehicle will reach in the
         step (SUMO keeps the lateral lane position while it moves, also onto the next
         lane): a position past the lane's end is taken on the route lane after it, whose
-        centre may lie elsewhere (a junction lane). Off-route lanes: ``lat = d``."""
+        centre may lie elsewhere (a junction lane). Off-route lanes: ``lat = d``. ``keys``:
+        :meth:`lane_keys` of ``lanes``, when the caller has them already."""
         pos = np.asarray(pos_m, dtype=float)
         d = np.asarray(d_m, dtype=float)
-        k = self.lane_keys(lanes)
+        k = self.lane_keys(lanes) if keys is None else keys
         lat = d.astype(float, copy=True)
         ok = k >= 0
         if not ok.any():

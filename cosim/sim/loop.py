@@ -194,7 +194,7 @@ class Loop:
         st.cav_rows = rows
         if len(rows):
             all_ids = state.ids
-            st.cav_ids = [all_ids[r] for r in rows.tolist()]
+            st.cav_ids = list(map(all_ids.__getitem__, rows.tolist()))
             self.world.take_over(st.cav_ids)
 
     def _reference(self, st: StepData) -> None:
@@ -215,7 +215,7 @@ class Loop:
             others_q=_pair(state.s, state.d, others),
             others_p=_pair(state.v, state.v_lat, others),
             others_length=state.length[others], others_width=state.width[others],
-            others_ids=_objects([all_ids[r] for r in others.tolist()]),
+            others_ids=_objects(list(map(all_ids.__getitem__, others.tolist()))),
             road_edges=edges, period_s=self.world.period, desired_speed=desired,
             road=self.world.road,
         )

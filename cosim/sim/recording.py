@@ -30,10 +30,17 @@ PENDING_SAMPLE_S = 1.0
 def step_state(st: StepData, road) -> StepState:
     """The vehicles on the main route as the traffic metrics see them."""
     state = st.state
+    if state.on_main.all():  # every vehicle on the main route (the usual case): no copies
+        edges = road.edges(state.s) if len(state.s) else np.zeros((0, 2))
+        return StepState(
+            t=st.t, ids=list(state.ids), s=state.s, s_front=state.s_front, d=state.d,
+            v=state.v, v_lat=state.v_lat, length=state.length, width=state.width,
+            is_cav=state.is_cav, edge_right=edges[:, 0], edge_left=edges[:, 1],
+            is_static=state.is_static, desired=state.desired,
+        )
     rows = np.flatnonzero(state.on_main)
     edges = road.edges(state.s[rows]) if len(rows) else np.zeros((0, 2))
-    ids = (list(state.ids) if len(rows) == len(state.ids)
-           else list(map(state.ids.__getitem__, rows.tolist())))
+    ids = list(map(state.ids.__getitem__, rows.tolist()))
     return StepState(
         t=st.t, ids=ids, s=state.s[rows], s_front=state.s_front[rows],
         d=state.d[rows], v=state.v[rows], v_lat=state.v_lat[rows], length=state.length[rows],

@@ -163,8 +163,11 @@ def build_world(sc: Scenario, work: Path, gui: bool = False):
         detectors = write_detectors(net, [x for x in xs if x <= net.length_m],
                                     work / "detectors.add.xml", run.interval_s, work / "sumo")
         args += ["-a", str(detectors.path)]
+    # a longer action step only where no SUMO driver shares the road: around CAVs acting
+    # less often SUMO's drivers behave differently (scenario.cav_action_step_s)
+    action_step = run.cav_action_step_s if routes.n_hdv == 0 else run.step_length_s
     world = SumoWorld(net, args, dt=run.step_length_s, desired=routes.desired_speed_mps,
-                      gui=gui, cav_action_step_s=run.cav_action_step_s)
+                      gui=gui, cav_action_step_s=action_step)
     return world, net, plan, detectors
 
 
@@ -262,6 +265,7 @@ def _run_in(sc: Scenario, work: Path, gui: bool, progress, hooks) -> RunResult:
         "seed": run.seed,
         "versions": versions(),
         "world": run.world,
+        "sumo_cav_action_step_s": getattr(world, "cav_action_step_s", None),
         "network": {"file": str(getattr(net, "net_file", "")), "kind": net.kind,
                     "length_m": net.length_m},
         "demand": {"vehicles": n_planned, "arrival_process": plan.process,

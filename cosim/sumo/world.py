@@ -18,6 +18,8 @@ import operator
 import os
 import sys
 import tempfile
+from collections import deque
+from itertools import compress
 
 import numpy as np
 
@@ -28,6 +30,9 @@ from cosim.sumo.binaries import sumo_binary
 
 _VARS = None
 _GETTER = None
+
+#: Run an iterator to its end without keeping its items (a C-level loop).
+_consume = deque(maxlen=0).extend
 
 
 def _row_getter():
@@ -115,6 +120,25 @@ def _captured_stderr():
             )
 
 
+class _LaneCodes(dict):
+    """Lane id -> a small code (int), assigned on first sight; the world's arrays by code
+    say the lane's road-frame table key, whether it is on the main route and whether its
+    edge has several lanes, so that a step looks every lane id up once."""
+
+    def __init__(self, world: SumoWorld) -> None:
+        super().__init__()
+        self.world = world
+
+    def __missing__(self, lane: str) -> int:
+        w = self.world
+        code = len(self)
+        self[lane] = code
+        w._code_key = np.append(w._code_key, w.net.lane_keys([lane]))
+        w._code_main = np.append(w._code_main, lane in w.main_lanes)
+        w._code_side = np.append(w._code_side, lane in w._side_lanes)
+        return code
+
+
 class SumoWorld:
     """A running SUMO simulation seen in the road frame of ``net`` (a :class:`World`).
 
@@ -125,12 +149,13 @@ class SumoWorld:
         desired: desired speed (m/s) per vehicle id (from the demand plan).
         cav_prefix: vType id prefix that marks CAVs.
         gui: run ``sumo-gui`` through TraCI instead of libsumo.
-        cav_action_step_s: SUMO's action step for controlled CAVs, s (``scenario.
-            cav_action_step_s``; None: one step). SUMO runs a vehicle's own decisions (its
-            lane changer, its car-following plan) once per action step; our law overrules
-            both every step, so a longer one only saves SUMO's work. Above one step SUMO
-            moves such a vehicle by ``(v + v_next) dt / 2`` instead of ``v_next dt``:
-            :meth:`apply` makes the two equal.
+        cav_action_step_s: SUMO's action step for controlled CAVs, s (None: one step;
+            the runner gives ``scenario.cav_action_step_s`` when no human driver is in the
+            demand, else one step). SUMO runs a vehicle's own decisions (its lane changer,
+            its car-following plan) once per action step; our law overrules both every
+            step, so a longer one only saves SUMO's work. Above one step SUMO moves such a
+            vehicle by ``(v + v_next) dt / 2`` instead of ``v_next dt``: :meth:`apply`
+            makes the two equal.
     """
 
     def __init__(self, net: RoadNetwork, sumo_args: list[str], dt: float = 0.1,
@@ -152,10 +177,17 @@ class SumoWorld:
         self.types: dict[str, str] = {}
         # length, width, is_cav, desired speed
         self._static: dict[str, tuple[float, float, bool, float]] = {}
-        self._lane_info: dict[str, tuple[float, float, bool]] = {}  # offset, lane d, on main
-        self._lane_of: dict[str, str] = {}
-        self._pos_of: dict[str, float] = {}
-        self._lane_main: dict[str, bool] = {}  # lane id -> on the main route
+        #: lane id -> a small code, and by code: the road frame's table key of the lane,
+        #: whether it is on the main route, whether its edge has several lanes
+        self._lane_code = _LaneCodes(self)
+        self._code_key = np.zeros(0, dtype=np.int64)
+        self._code_main = np.zeros(0, dtype=bool)
+        self._code_side = np.zeros(0, dtype=bool)
+        #: the last observation: row of each id, lane ids, table keys, lane positions (m)
+        self._row_of: dict[str, int] = {}
+        self._lanes: tuple = ()
+        self._keys = np.zeros(0, dtype=np.int64)
+        self._pos = np.zeros(0)
         self._static_ids: list | None = None  # the vehicles of _static_cols, in order
         self._static_cols: tuple = ()
         self.departed_now: list[str] = []
@@ -175,8 +207,10 @@ class SumoWorld:
         #: three_lane): lane id -> [(lane id, d of its right border, d of its left
         #: border, length)] of every lane of its edge (m), for crossing between them
         self._side_lanes = _side_lanes(net)
-        #: controlled CAVs given an action step of one step (see _act_every_step)
+        #: controlled CAVs given an action step of one step, and those of them in the step
+        #: after their last changeSublane move (see _act_every_step)
         self._every_step: set[str] = set()
+        self._clearing: set[str] = set()
 
     def _is_main(self, lane: str) -> bool:
         edge = lane.rsplit("_", 1)[0] if not lane.startswith(":") else lane
@@ -241,14 +275,6 @@ class SumoWorld:
             self.v_lat_state.pop(vid, None)
         self._hold_obstacle()
 
-    def _lane(self, lane: str) -> tuple[float, float, bool]:
-        info = self._lane_info.get(lane)
-        if info is None:
-            off = self.net.lane_offsets.get(lane, np.nan)
-            info = (off, self.net.lane_d.get(lane, 0.0), lane in self.main_lanes)
-            self._lane_info[lane] = info
-        return info
-
     def observe(self) -> RoadSnapshot:
         """All vehicles on the network, in the road frame (centre positions).
 
@@ -276,47 +302,48 @@ class SumoWorld:
                                  cols[:, 3].copy())
             self._static_ids = ids
         length, width, is_cav, desired = self._static_cols
-        main = list(map(self._lane_main.get, lane))
-        if None in main:
-            main = [self._lane(ln)[2] for ln in lane]
-            self._lane_main.update(zip(lane, main, strict=True))
-        self._lane_of = dict(zip(ids, lane, strict=True))
+        codes = np.fromiter(map(self._lane_code.__getitem__, lane), dtype=np.int64, count=n)
+        keys = self._code_key[codes]
+        self._row_of = dict(zip(ids, range(n), strict=True))
+        self._lanes, self._keys, self._pos = lane, keys, pos
         if self._on_ramp:
             self._release_ramp()
-        self._pos_of = dict(zip(ids, pos_l, strict=True))
         # vehicles to move sideways with changeSublane (see apply): the back still on the
         # lane before, or on an edge of several lanes; their lateral lane positions now
         sublane = pos < length
         if self._side_lanes:
-            side = self._side_lanes
-            sublane |= np.fromiter((ln in side for ln in lane), dtype=bool, count=n)
+            sublane |= self._code_side[codes]
         self._sublane_lat = {ids[i]: float(lat[i]) for i in np.flatnonzero(sublane).tolist()}
         # (lane, position, lateral position) -> (s, d): the lanes' real geometry
-        s_front, d_front = self.net.lane_frame(lane, pos, lat)
+        s_front, d_front = self.net.lane_frame(None, pos, lat, keys=keys)
         s = s_front - 0.5 * length
         if self.period is not None:
             s = np.mod(s, self.period)
-        on_main = np.array(main, dtype=bool).reshape(n) & ~np.isnan(s)
+        on_main = self._code_main[codes] & ~np.isnan(s)
         is_static = np.zeros(n, dtype=bool)
-        if self.obstacle_id is not None and self.obstacle_id in self._lane_of:
-            is_static[ids.index(self.obstacle_id)] = True
+        if self.obstacle_id is not None and self.obstacle_id in self._row_of:
+            is_static[self._row_of[self.obstacle_id]] = True
         return RoadSnapshot(ids, s, s_front, d_front, speed, v_lat_now, length.copy(),
                             width.copy(), is_cav.copy(), on_main, is_static, desired.copy())
 
     def _release_ramp(self) -> None:
         """Give vehicles that reached the main road back their lane-change model."""
         veh = self.ts.vehicle
-        for vid in [v for v in self._on_ramp if v not in self._lane_of
-                    or self._lane_of[v] in self.main_lanes]:
+        row_of, lanes = self._row_of, self._lanes
+        for vid in [v for v in self._on_ramp if v not in row_of
+                    or lanes[row_of[v]] in self.main_lanes]:
             self._on_ramp.discard(vid)
-            if vid in self._lane_of and vid not in self.controlled:
+            if vid in row_of and vid not in self.controlled:
                 veh.setLaneChangeMode(vid, SUMO_DEFAULT_LANE_CHANGE_MODE)
 
     def take_over(self, ids: list) -> None:
         """Hand CAVs to our controller: no SUMO speed checks, no SUMO lane changes."""
+        new = set(ids).difference(self.controlled)
+        if not new:
+            return
         veh = self.ts.vehicle
         for vid in ids:
-            if vid in self.controlled:
+            if vid not in new:
                 continue
             veh.setSpeedMode(vid, 0)
             veh.setLaneChangeMode(vid, 0)
@@ -352,10 +379,10 @@ class SumoWorld:
         Longitudinal: ``setSpeed(v_next)``, preceded by ``setPreviousSpeed(v_next)`` when
         the CAVs' action step is longer than a step: SUMO then moves a CAV by
         ``(v + v_next) dt / 2``; with its speed at the start of the step set to ``v_next``
-        too, that is exactly
-        ``v_next dt``, the semi-implicit Euler step of the loop (bench_floor.py's exactness
-        check, tests/test_sumo_loop.py). SUMO's drivers planning in that step read the CAV's
-        speed as ``v_next``, the speed it moves at in the step.
+        too, that is exactly ``v_next dt``, the semi-implicit Euler step of the loop
+        (bench_floor.py's exactness check; tests/test_exactness.py: bit-identical runs).
+        SUMO's drivers planning in that step would read the CAV's speed as ``v_next``; the
+        runner uses a long action step only when there are none.
 
         Every CAV gets every setter every step (``setSpeed`` persists in SUMO, so skipping
         an unchanged one would be exact, but benchmarks/bench_floor.py measured 1 %: not
@@ -363,46 +390,63 @@ class SumoWorld:
         wrapper layer of its Python module (the same C++ calls).
         """
         veh = self.ts.vehicle
-        lane_of, pos_of = self._lane_of, self._pos_of
-        lanes = [lane_of[i] for i in ids]
-        pos = np.array([pos_of[i] for i in ids], dtype=float).reshape(len(ids))
+        rows = np.fromiter(map(self._row_of.__getitem__, ids), dtype=np.int64, count=len(ids))
+        pos = self._pos[rows]
         v_next = np.asarray(v_next, dtype=float)
         # road-frame d -> lateral lane position where the vehicle will be after the step
-        lats = self.net.lateral_lane_position(lanes, pos + v_next * self.dt, d_next)
+        lats = self.net.lateral_lane_position(None, pos + v_next * self.dt, d_next,
+                                              keys=self._keys[rows])
         if self._side_lanes:
-            self._cross_lanes(ids, lanes, pos, v_next, d_next, lats)
+            lanes = self._lanes
+            self._cross_lanes(ids, [lanes[r] for r in rows.tolist()], pos, v_next, d_next,
+                              lats)
         set_prev, set_speed, set_lat = self._setters(veh)
         sublane = self._sublane_lat
         self._act_every_step(sublane)
-        slow = self._slow_actions
-        for vid, v, lat in zip(ids, v_next.tolist(), lats.tolist(), strict=True):
-            if slow:
-                set_prev(vid, v)
-            set_speed(vid, v)
-            if vid in sublane:
-                veh.changeSublane(vid, lat - sublane[vid])
-            else:
-                set_lat(vid, lat)
+        # one C-level pass per setter (each vehicle's commands are independent of the
+        # others', so the order of the calls does not matter)
+        vs, lats_l = v_next.tolist(), lats.tolist()
+        if self._slow_actions:
+            _consume(map(set_prev, ids, vs))
+        _consume(map(set_speed, ids, vs))
+        if sublane:
+            moved = np.fromiter(map(sublane.__contains__, ids), dtype=bool, count=len(ids))
+            placed = (~moved).tolist()
+            _consume(map(set_lat, compress(ids, placed), compress(lats_l, placed)))
+            for i in np.flatnonzero(moved).tolist():
+                veh.changeSublane(ids[i], lats_l[i] - sublane[ids[i]])
+        else:
+            _consume(map(set_lat, ids, lats_l))
         self.v_lat_state.update(zip(ids, np.asarray(v_lat_next, dtype=float).tolist(),
                                     strict=True))
 
     def _act_every_step(self, sublane: dict) -> None:
         """Give the CAVs that move with ``changeSublane`` this step an action step of one
-        step, and the others back ``cav_action_step_s``: SUMO's lane changer carries
-        out a ``changeSublane`` request in full only in a vehicle's action step. (The
-        position update does not change: with ``setPreviousSpeed`` both rules give
-        ``v_next dt``.)"""
-        every = self._every_step
-        if not self._slow_actions or (not sublane and not every):
+        step, keep it one step more after their last such move, then give them back
+        ``cav_action_step_s``.
+
+        SUMO's lane changer carries out a ``changeSublane`` request in full only in a
+        vehicle's action step, and it clears the request's remaining distance and lateral
+        speed only in the action step after it. Left standing, SUMO would reserve that
+        distance beside a vehicle whose action step is longer than a step, in the sublanes
+        its drivers see (``MSLeaderInfo::getSubLanes``): SUMO's drivers would see the CAV
+        wider than it is. (The position update is the same for both action steps: with
+        ``setPreviousSpeed`` both rules give ``v_next dt``.)"""
+        at_dt = self._every_step
+        if not self._slow_actions or (not sublane and not at_dt):
             return
         want = self.controlled.intersection(sublane)
-        veh = self.ts.vehicle
-        for vid in every - want:
+        keep = want | (at_dt - want - self._clearing)
+        raw = getattr(self.ts, "_libsumo", None)
+        set_asl = getattr(raw, "vehicle_setActionStepLength", None) \
+            or self.ts.vehicle.setActionStepLength
+        for vid in at_dt - keep:
             if vid in self.controlled:
-                veh.setActionStepLength(vid, self.cav_action_step_s, True)
-        for vid in want - every:
-            veh.setActionStepLength(vid, self.dt, True)
-        self._every_step = want
+                set_asl(vid, self.cav_action_step_s, True)
+        for vid in keep - at_dt:
+            set_asl(vid, self.dt, True)
+        self._clearing = keep - want
+        self._every_step = keep
 
     def _cross_lanes(self, ids: list, lanes: list, pos: np.ndarray, v_next: np.ndarray,
                      d_next: np.ndarray, lats: np.ndarray) -> None:
@@ -426,7 +470,6 @@ class SumoWorld:
                 continue
             p = min(float(pos[i]) * target[3] / here[3], target[3] - 1e-3)
             self.ts.vehicle.moveTo(ids[i], target[0], p)
-            self._lane_of[ids[i]] = target[0]
             # placed with setLateralLanePosition in this step (changeSublane right after
             # moveTo does not land); from the next step on it moves with changeSublane
             self._sublane_lat.pop(ids[i], None)

@@ -66,19 +66,14 @@ LAW_CASES: dict[str, tuple[str, dict, int, int]] = {
 
 #: name -> (scenario name, overrides, duration s); states every 10th step, commands every 5th
 TRAJ_CASES: dict[str, tuple[str, dict, float]] = {
-    # SUMO's action step for CAVs of one step: the path the reference was recorded on
-    # (with 1 s, SUMO's drivers read a CAV's speed of the step it is in; see
-    # cosim.sumo.world.SumoWorld.apply). Recording with a tree from before that setting
-    # needs the key left out.
     "sumo_obstacle": ("obstacle", {"demand.inflow_vph": 3000.0, "scenario.seed": 5,
-                                   "obstacle.s_m": 320.0, "scenario.cav_action_step_s": 0.1},
-                      40.0),
+                                   "obstacle.s_m": 320.0}, 40.0),
     "road_narrowing": ("varying_width", {"scenario.world": "road", "scenario.seed": 4,
                                          "demand.inflow_vph": 3000.0}, 40.0),
 }
 #: Cases run twice by tests/test_exactness.py, with SUMO's action step for CAVs of one step
-#: and of 1 s (``scenario.cav_action_step_s``): with no SUMO drivers on the road the CAVs
-#: must move bit-identically (no reference file). The obstacle road has edge joints every
+#: and of 1 s (``scenario.cav_action_step_s``, used when no human drivers are on the road):
+#: the CAVs must move bit-identically (no reference file). The obstacle road has edge joints every
 #: 100 m and changeSublane moves; the ring junction lanes; the on-ramp an acceleration lane.
 ACTION_STEP_CASES: dict[str, tuple[str, dict, float]] = {
     f"{scen}_asl_{a:g}": (scen, {**ov, "demand.cav_share": 1.0, "scenario.cav_action_step_s": a},

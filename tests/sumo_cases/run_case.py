@@ -35,7 +35,8 @@ def main(out_dir: str, spec: str) -> dict:
     out = {"summary": summary, "n_routes": len(route_ids),
            "road_length_m": res.meta["network"]["length_m"],
            "speed_limit_mps": sc.network.speed_limit_mps,
-           "dt": sc.scenario.step_length_s}
+           "dt": sc.scenario.step_length_s,
+           "sumo_cav_action_step_s": res.meta["sumo_cav_action_step_s"]}
     tr = res.trajectories
     if tr is not None:
         t_end = float(tr["t_s"].max())

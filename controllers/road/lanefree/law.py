@@ -184,8 +184,7 @@ class LaneFreeFlocking:
     def _slots(self, ids: list) -> tuple[np.ndarray, np.ndarray]:
         """Memory slots (N,) of the CAVs and which of them start afresh (N,) (absent in the
         previous step: no memory, as when it was pruned)."""
-        get = self._slot.get
-        found = [get(i) for i in ids]
+        found = list(map(self._slot.get, ids))
         if None in found:
             for r, k in enumerate(found):
                 if k is None:
