@@ -2,7 +2,7 @@
 
 Case (issue 15, the same as ``bench_floor.py``): straight 2 km x 10.2 m road, 8 000 veh/h,
 100 % CAVs, 300 s, step 0.1 s, lateral resolution 0.8 m, SUMO's collision check on
-(``--collision.action warn``), seed 3. Three variants, each its own process (libsumo holds
+(``--collision.action warn``), seed 3. Five variants, each its own process (libsumo holds
 one simulation per process), interleaved over ``--rounds`` rounds in rotating order:
 
 * ``sumo``   the ``sumo`` binary on the same network and routes, SUMO drives everyone
@@ -11,6 +11,12 @@ one simulation per process), interleaved over ``--rounds`` rounds in rotating or
              take every CAV over, ``setSpeed`` + ``setLateralLanePosition`` for every CAV
              every step, holding speed and lateral position (``bench_floor.py``'s variant
              ``e``, imported from it);
+* ``floor.1s`` the floor with the take-over ``cosim`` uses on a road without human
+             drivers: the CAVs' SUMO action step is 1 s, ``setPreviousSpeed`` before
+             ``setSpeed`` (``bench_floor.py``'s ``e.asl``);
+* ``cosim.0.1s`` ``cosim`` with the CAVs' SUMO action step of one step
+             (``scenario.cav_action_step_s = 0.1``, the path before; SUMO runs its lane
+             changer and car-following plan for every CAV every step);
 * ``cosim``  ``run_scenario`` of that case (what ``cosim run`` runs, without writing its
              output files): the lane-free flocking law, the safety layer, every recorder.
 
@@ -18,7 +24,8 @@ CPU s: process CPU time in the child from the start of the run (``libsumo.start`
 ``run_scenario``, network and routes loaded) to its end; Python's start and imports are not
 in it (``proc s``: the whole child process, imports included; for ``sumo`` the whole
 binary). Ratios are medians of per-round ratios (the load of the shared machine cancels as
-far as it can). ``us/veh-step``: CPU per vehicle on the road per step.
+far as it can); the last two columns give the lowest and highest per-round ratio.
+``us/veh-step``: CPU per vehicle on the road per step.
 
 Then the cost split of ``cosim`` by phase (medians over rounds), measured by the loop's own
 hooks (:class:`cosim.sim.loop.PhaseTimer`; no monkeypatching): ``advance`` is SUMO's step,
@@ -188,6 +195,12 @@ def _ratio(res: dict, num: str, den: str) -> float:
     return bf._med([a["cpu_s"] / b["cpu_s"] for a, b in zip(res[num], res[den], strict=True)])
 
 
+def _spread(res: dict, num: str, den: str) -> str:
+    """Lowest and highest per-round ratio ``num / den`` (how much the load moved it)."""
+    r = [a["cpu_s"] / b["cpu_s"] for a, b in zip(res[num], res[den], strict=True)]
+    return f"{min(r):.2f}-{max(r):.2f}"
+
+
 def print_main(res: dict) -> None:
     what = {"sumo": "sumo binary, SUMO drives everyone",
             "floor": "libsumo floor (bench_floor e)",
@@ -195,8 +208,9 @@ def print_main(res: dict) -> None:
             "cosim.0.1s": "cosim, CAV action step 0.1 s (the path before)",
             "cosim": "cosim: run_scenario, flocking + safety + metrics"}
     print(f"\n{'variant':<11}{'what':<50}{'CPU s':>7}{'/ sumo':>8}{'/ floor':>8}"
-          f"{'/ f.1s':>8}{'proc s':>8}{'veh-steps':>10}{'us/veh-step':>12}")
-    print("-" * 122)
+          f"{'/ f.1s':>8}{'proc s':>8}{'veh-steps':>10}{'us/veh-step':>12}"
+          f"{'rounds: / sumo':>16}{'/ floor':>11}")
+    print("-" * 149)
     for n in VARIANTS:
         rows = res[n]
         cpu = bf._med([r["cpu_s"] for r in rows])
@@ -205,7 +219,8 @@ def print_main(res: dict) -> None:
         us = 1e6 * cpu / vs if vs and math.isfinite(vs) else float("nan")
         print(f"{n:<11}{what[n]:<50}{cpu:7.2f}{_ratio(res, n, 'sumo'):8.2f}"
               f"{_ratio(res, n, 'floor'):8.2f}{_ratio(res, n, 'floor.1s'):8.2f}"
-              f"{bf._med([r['proc_s'] for r in rows]):8.2f}{vs:10.0f}{us:12.2f}")
+              f"{bf._med([r['proc_s'] for r in rows]):8.2f}{vs:10.0f}{us:12.2f}"
+              f"{_spread(res, n, 'sumo'):>16}{_spread(res, n, 'floor'):>11}")
 
 
 def print_phases(res: dict) -> None:
