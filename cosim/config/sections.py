@@ -72,8 +72,10 @@ class RunSpec:
             no human drivers (with humans the CAVs act every step). SUMO runs a vehicle's
             own decisions (lane changer, car-following plan) once per action step; our
             law overrules them every step, so a longer one only saves SUMO's work (its
-            step costs about a third at 1 s: benchmarks/bench_floor.py), and the CAVs
-            move bit-identically (tests/test_exactness.py). With SUMO's drivers on the
+            step costs about a third at 1 s: benchmarks/bench_floor.py); every command
+            lands as before, and runs were bit-identical on the built-in roads tested
+            (tests/test_exactness.py), though SUMO's insertion may differ by a step (a
+            netconvert width change: README). With SUMO's drivers on the
             road it is not used: they behave differently around CAVs that act once a
             second (on the TUM ring with 10 % CAVs the flow fell by 11-14 %; cause in
             SUMO not found). ``meta.json`` records the action step used
