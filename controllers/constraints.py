@@ -145,16 +145,28 @@ class AccelerationBox(Layer):
 
     def apply(self, u: np.ndarray, obs: Observation) -> np.ndarray:
         m = u.shape[1]
-        lo = np.full(m, -self.lat_max)
-        hi = np.full(m, self.lat_max)
-        lo[0], hi[0] = self.long_min, self.long_max
+        lo, hi = self._bounds(m)
         out = np.clip(u, lo, hi)
         if self.a_max is not None:
             norm = np.linalg.norm(out, axis=1)
             big = norm > self.a_max
             out[big] *= (self.a_max / norm[big])[:, None]
-        self._count(np.any(out != u, axis=1))
+        changed = out != u
+        if m == 2:  # the road (an axis reduction costs more than the or of two columns)
+            self._count(changed[:, 0] | changed[:, 1])
+        else:
+            self._count(np.any(changed, axis=1))
         return out
+
+    def _bounds(self, m: int) -> tuple[np.ndarray, np.ndarray]:
+        """Lower and upper bound (m,) per axis, m/s^2 (kept per m)."""
+        cache = self.__dict__.setdefault("_bounds_by_m", {})
+        if m not in cache:
+            lo = np.full(m, -self.lat_max)
+            hi = np.full(m, self.lat_max)
+            lo[0], hi[0] = self.long_min, self.long_max
+            cache[m] = (lo, hi)
+        return cache[m]
 
 
 @dataclass

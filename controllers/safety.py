@@ -224,7 +224,8 @@ class SafetyLayer:
         cav_index = np.asarray(cav_index, dtype=np.int64)
         v = road.v[cav_index]
         # neighbours within a longitudinal reach
-        reach = float(np.max(v)) * c.tau + float(np.max(v)) ** 2 / (2 * c.own_decel_mps2)
+        v_max = float(np.max(v))
+        reach = v_max * c.tau + v_max ** 2 / (2 * c.own_decel_mps2)
         reach += float(np.max(road.length)) + c.min_gap_m + 10.0
         m = len(road.s)
         periodic = period is not None
@@ -241,11 +242,19 @@ class SafetyLayer:
             _f64(road.length), _f64(road.width),
             np.zeros(m) if road.v_lat is None else _f64(road.v_lat), is_cav, _f64(edges),
             periodic, float(period) if periodic else 0.0, order, key,
-            _f64(wall_gap) if has_wall else np.zeros(0), has_wall, reach, _scalars(c))
+            _f64(wall_gap) if has_wall else np.zeros(0), has_wall, reach, self._scalars_of(c))
         self.counts.edge += int(counts[0])
         self.counts.side += int(counts[1])
         self.counts.speed += int(counts[2])
         return u, v_lat_next
+
+    def _scalars_of(self, c: SafetyConfig) -> np.ndarray:
+        """:func:`_scalars` of ``c``, kept while the layer's config is the same object."""
+        cached = self.__dict__.get("_scalars_cache")
+        if cached is None or cached[0] is not c:
+            cached = (c, _scalars(c))
+            self.__dict__["_scalars_cache"] = cached
+        return cached[1]
 
 
 def _f64(x) -> np.ndarray:

@@ -16,6 +16,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from controllers.neighbours import tree_points
+from cosim.metrics import kernels as K
 from cosim.metrics import traffic
 from cosim.metrics.traffic import StepState, gaps_and_leaders, overlapping_pairs
 
@@ -127,10 +128,13 @@ CASES = [
 
 def assert_same_gaps(st, period, margin=0.0):
     want = ref_gaps_and_leaders(st, period, margin)
-    got = gaps_and_leaders(st, period, margin)
-    for g, w, name in zip(got, want, ("g_long", "g_side", "leader"), strict=True):
-        assert g.dtype == w.dtype and g.shape == w.shape, name
-        assert np.array_equal(g, w), name
+    pairs, both = traffic.overlaps_and_gaps(st, period, True, margin)  # one sweep for both
+    for got in (gaps_and_leaders(st, period, margin), both):
+        for g, w, name in zip(got, want, ("g_long", "g_side", "leader"), strict=True):
+            assert g.dtype == w.dtype and g.shape == w.shape, name
+            assert np.array_equal(g, w), name
+    want_pairs = ref_overlapping_pairs(st, period)
+    assert pairs.dtype == want_pairs.dtype and np.array_equal(pairs, want_pairs)
 
 
 def assert_same_overlaps(st, period):
@@ -197,15 +201,16 @@ def test_compiled_path_taken():
     for period in (None, 500.0, 250.0):  # 250 m: shorter than twice the reach
         st = random_state(rng, 200, 500.0 if period is None else period, 10.2, False, period)
         px, py, box_y = traffic._points(st, 150.0, period)
-        cand = traffic._pairs_within(px, py, 150.0, period is not None,
-                                     traffic._period(period), box_y)
+        cand = K.pairs_within(px, py, 150.0, period is not None, traffic._period(period),
+                              box_y)
         pts, box = tree_points(np.column_stack([st.s, st.d]), 150.0, period)
         tree = cKDTree(pts, boxsize=box).query_pairs(150.0, output_type="ndarray")
         key = np.sort(cand[:, 0] * 200 + cand[:, 1])
         assert len(key) > 1000
         assert np.array_equal(key, np.sort(tree[:, 0] * 200 + tree[:, 1]))
-        _, _, _, tied = traffic._gaps_kernel(cand, st.s, st.d, st.length, st.width,
-                                             period is not None, traffic._period(period), 0.0)
+        _, _, _, _, _, tied = K.pair_sweep(px, py, st.s, st.d, st.length, st.width,
+                                           period is not None, traffic._period(period),
+                                           box_y, 5.0, True, 150.0, 0.0)
         assert not tied
 
 
@@ -237,9 +242,9 @@ def test_ring_wrap_matches_numpy():
                       2.5 * period, -1.5 * period, 1e-17, -1e-17]),
         ])
         want = (ds + 0.5 * period) % period - 0.5 * period
-        got = np.array([traffic._wrap_ds(x, True, period) for x in ds])
+        got = np.array([K.wrap_ds(x, True, period) for x in ds])
         assert np.array_equal(got.view(np.int64), want.view(np.int64))
-        assert np.array_equal(np.array([traffic._wrap_ds(x, False, period) for x in ds]), ds)
+        assert np.array_equal(np.array([K.wrap_ds(x, False, period) for x in ds]), ds)
 
 
 def test_strided_arrays_identical():

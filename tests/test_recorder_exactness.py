@@ -5,7 +5,8 @@ _flock_sample, CapacityRecorder) and ``cosim/metrics/flock.py`` (flock_metrics a
 proximity net) were vectorised: no Python loop per vehicle, no dictionaries rebuilt every
 step, the proximity net and nearest-neighbour distances computed once per sample. Below
 are verbatim copies of the code before that change (``Old*`` / ``old_*``; only the names
-changed) and the new code must agree with them bit for bit: on synthetic step sequences
+changed, and the old jam recorder accepts and ignores the ``prev_rows`` its caller now
+passes) and the new code must agree with them bit for bit: on synthetic step sequences
 (vehicles entering and leaving, standstills, obstacles, straight road and ring) and on
 whole SUMO-free road-world runs (``scenario.world = "road"``), whose summary, intervals,
 flock, collisions and meta tables must be identical with the old recorders patched in.
@@ -71,7 +72,7 @@ class OldJamRecorder:
         self.blocked_log: list[dict] = []
 
     def record(self, t: float, ids: list, s_front: np.ndarray, v: np.ndarray,
-               is_static: np.ndarray) -> None:
+               is_static: np.ndarray, prev_rows=None) -> None:  # prev_rows: ignored
         """One step: ids (M,), front positions (M,) m, speeds (M,) m/s, obstacle mask (M,)."""
         moving_ids = set()
         stopped = (v < self.v_stop) & ~is_static
@@ -679,3 +680,29 @@ def test_connectivity_with_given_pairs_in_any_order_matches_the_old_one():
         assert new_flock.connectivity(q, 30.0, period, shuffled) == want
         assert (new_flock.deviation_energy(q, 7.0, 30.0, period, pairs)
                 == old_deviation_energy(q, 7.0, 30.0, period))
+
+
+def test_compiled_flock_net_matches_the_old_metrics_on_ties_grids_and_seams():
+    """The compiled proximity net, components and nearest distances (m = 2) against the old
+    code on states built to break them: positions on grids (equal distances, pairs at
+    exactly the radius, duplicates), around the dense/tree switch (64 agents), points on a
+    ring's seam."""
+    rng = np.random.default_rng(11)
+    for _ in range(400):
+        n = int(rng.choice([2, 3, 20, 64, 65, 120]))
+        period = None if rng.random() < 0.5 else float(rng.choice([100.0, 300.0, 123.4]))
+        road = period or float(rng.choice([50.0, 400.0]))
+        if rng.random() < 0.5:
+            step = float(rng.choice([0.5, 1.0, 2.5, 3.0]))
+            s = rng.integers(0, max(int(road / step), 1), n) * step
+            d = rng.integers(-4, 5, n) * float(rng.choice([1.0, 0.5, 1.275]))
+        else:
+            s, d = rng.uniform(0, road, n), rng.uniform(-5, 5, n)
+        if period and rng.random() < 0.3:
+            k = rng.integers(0, n, max(n // 4, 1))
+            s[k] = rng.choice([period - 1e-9, 0.0, -0.0, 1e-12, 0.5 * period], len(k))
+        q = np.column_stack([s, d])
+        p = np.column_stack([rng.uniform(0, 30, n), rng.normal(0, 0.3, n)])
+        d_lat, r = float(rng.choice([1.0, 7.0, 29.0])), float(rng.choice([1.0, 2.5, 3.0, 58.0]))
+        assert _same_dict(old_flock_metrics(q, p, d_lat, r, period=period),
+                          new_flock.flock_metrics(q, p, d_lat, r, period=period)), (n, period)

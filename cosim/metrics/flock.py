@@ -19,8 +19,9 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from controllers.neighbours import neighbour_pairs, tree_points
+from controllers.neighbours import DENSE_MAX_N, neighbour_pairs, tree_points
 from controllers.observation import Circles, Walls
+from cosim.metrics import kernels as K
 
 
 def nearest_neighbour_distances(q: np.ndarray, period: float | None = None) -> np.ndarray:
@@ -143,10 +144,15 @@ def flock_metrics(
 ) -> dict[str, float]:
     """All flock metrics of one instant, keyed by column name (units in the name).
 
-    The proximity net and the nearest-neighbour distances are computed once and shared."""
-    pairs = neighbour_pairs(q, r, period, "auto") if len(q) else None
-    n_comp, largest = connectivity(q, r, period, pairs)
-    nn = nearest_neighbour_distances(q, period) if len(q) > 1 else None
+    The proximity net and the nearest-neighbour distances are computed once and shared;
+    in the plane of the road (m = 2, finite float64 positions) by compiled searches that
+    give the same pairs, components and distances (:func:`_net_2d`)."""
+    if _compiled_ok(q):
+        pairs, n_comp, largest, nn = _net_2d(q, r, period)
+    else:
+        pairs = neighbour_pairs(q, r, period, "auto") if len(q) else None
+        n_comp, largest = connectivity(q, r, period, pairs)
+        nn = nearest_neighbour_distances(q, period) if len(q) > 1 else None
     return {
         "min_agent_distance_m": float(np.min(nn)) if nn is not None else np.inf,
         "min_obstacle_distance_m": min_obstacle_distance(q, circles, walls),
@@ -161,3 +167,36 @@ def flock_metrics(
         "n_components": n_comp,
         "largest_component_share": largest,
     }
+
+
+def _compiled_ok(q) -> bool:
+    """True when :func:`_net_2d` applies: (N, 2) float64 positions, N >= 2, all finite."""
+    return (isinstance(q, np.ndarray) and q.dtype == np.float64 and q.ndim == 2
+            and q.shape[1] == 2 and len(q) >= 2 and bool(np.isfinite(q).all()))
+
+
+def _net_2d(q: np.ndarray, r: float, period: float | None):
+    """``(pairs, n_components, largest_share, nn)`` of :func:`flock_metrics` for (N, 2)
+    positions (N >= 2): :func:`neighbour_pairs` ``"auto"`` (the dense test up to
+    ``DENSE_MAX_N`` agents, the tree's above it), :func:`connectivity` and
+    :func:`nearest_neighbour_distances`, each computed as those compute it, by the compiled
+    kernels of :mod:`cosim.metrics.kernels` (tests/test_recorder_exactness.py)."""
+    n = len(q)
+    periodic = period is not None
+    per = float(period) if periodic else 0.0
+    if n <= DENSE_MAX_N:
+        x = np.ascontiguousarray(q[:, 0])
+        y = np.ascontiguousarray(q[:, 1])
+        pairs = K.dense_pairs(x, y, float(r), periodic, per)
+    else:
+        pts, box = tree_points(q, r, period)
+        pairs = K.pairs_within(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]),
+                               float(np.nextafter(r, 0.0)), periodic, per,
+                               float(box[1]) if periodic else 0.0)
+        pairs = K.sorted_pairs(pairs, n)
+    n_comp, largest = K.components(pairs, n)
+    span = float(np.ptp(q[:, 1:]))
+    pts, box = tree_points(q, max(1.0, span), period)
+    nn = K.nearest_distances(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]),
+                             periodic, per, float(box[1]) if periodic else 0.0)
+    return pairs, int(n_comp), float(largest / n), nn

@@ -22,8 +22,23 @@ from itertools import repeat
 
 import numpy as np
 
+from cosim.metrics import kernels as K
+
 #: How far upstream of a cross-section a waiting vehicle counts for a blocked window, m.
 UPSTREAM_M = 100.0
+_NO_ROWS = np.zeros(0, dtype=np.int64)
+
+
+class _Unaligned:
+    """The marker :data:`UNALIGNED`."""
+
+    def __repr__(self) -> str:
+        return "UNALIGNED"
+
+
+#: ``prev_rows`` of a recorder's step that its caller did not align (the recorder does:
+#: :func:`align` of its own previous ids); None means the same vehicles at the same rows.
+UNALIGNED = _Unaligned()
 
 
 def align(prev_ids: list, ids: list) -> np.ndarray | None:
@@ -78,62 +93,38 @@ class JamRecorder:
         return {self._ids[r]: float(self._t0[r]) for r in rows}
 
     def record(self, t: float, ids: list, s_front: np.ndarray, v: np.ndarray,
-               is_static: np.ndarray) -> None:
-        """One step: ids (M,), front positions (M,) m, speeds (M,) m/s, obstacle mask (M,)."""
+               is_static: np.ndarray, prev_rows=UNALIGNED) -> None:
+        """One step: ids (M,), front positions (M,) m, speeds (M,) m/s, obstacle mask (M,);
+        ``prev_rows``: :func:`align` of the previous step's ids and ``ids``, if the caller
+        computed it (the recorders of a run share one), else :data:`UNALIGNED`."""
         ids = list(ids)  # a copy: kept for the next step, the caller may reuse its list
-        idx = align(self._ids, ids)
-        stopped = (v < self.v_stop) & ~is_static
-        if idx is None:
-            t0_prev, long_prev, front_prev = self._t0[:-1], self._long[:-1], self._front[:-1]
-        else:
-            t0_prev, long_prev, front_prev = self._t0[idx], self._long[idx], self._front[idx]
-        t0 = np.full(len(ids) + 1, np.nan)
-        long_now = np.zeros(len(ids) + 1, dtype=bool)
-        if stopped.any():
-            rows = np.flatnonzero(stopped)
-            began = t0_prev[rows]
-            began = np.where(np.isnan(began), t, began)
-            t0[rows] = began
-            dur = t - began
-            longest = dur.max()
-            if longest > self.max_standstill_s:
-                self.max_standstill_s = longest
-            is_long = dur > self.long_s
-            if is_long.any():
-                new = rows[is_long & ~long_prev[rows]]
-                self._long_ids.update([ids[r] for r in new])
-                long_now[rows[is_long]] = True
-            long_now[:-1] |= long_prev & stopped
+        idx = align(self._ids, ids) if prev_rows is UNALIGNED else prev_rows
+        is_static = np.asarray(is_static, dtype=bool)
+        s_front = np.asarray(s_front, dtype=float)
+        t0, long_now, stopped, front_prev, longest, new_long = K.jam_step(
+            float(t), np.asarray(v, dtype=float), is_static, s_front,
+            _NO_ROWS if idx is None else idx, idx is None, self._t0, self._long, self._front,
+            float(self.v_stop), float(self.long_s))
+        if longest > self.max_standstill_s:
+            self.max_standstill_s = longest
+        if len(new_long):
+            self._long_ids.update([ids[r] for r in new_long.tolist()])
         self._windows(t, s_front, stopped, is_static, front_prev)
         self._ids = ids
         self._t0 = t0
         self._long = long_now
-        self._front = np.append(np.asarray(s_front, dtype=float), np.nan)
+        self._front = np.append(s_front, np.nan)
 
     def _windows(self, t, s_front, stopped, is_static, prev) -> None:
         if not len(self.xs) or t <= self.warmup_s + 1e-9:
             return
         if self._win_start is None:
             self._win_start = self.warmup_s
-        xs = self.xs[:, None]  # (K, 1)
-        todo = ~self._win_crossed  # crossings since the last step, where still unseen
-        if todo.any():
-            ok = np.isfinite(prev) & ~is_static
-            cur, prv = s_front[ok], prev[ok]
-            x = xs[todo]
-            if self.period is not None:
-                cur = np.where(cur < prv - 0.5 * self.period, cur + self.period, cur)
-            hit = (prv < x) & (cur >= x)
-            if self.period is not None:
-                hit |= (prv < x + self.period) & (cur >= x + self.period)
-            self._win_crossed[todo] = hit.any(axis=1)
-        todo = self._win_waiting  # a vehicle waiting upstream, where still always
-        if todo.any():
-            up = xs[todo] - s_front
-            if self.period is not None:
-                up = np.mod(up, self.period)
-            waiting = stopped & (up >= 0) & (up <= UPSTREAM_M)
-            self._win_waiting[todo] = waiting.any(axis=1)
+        if not self._win_crossed.all() or self._win_waiting.any():
+            K.jam_windows(s_front, stopped, is_static, prev, self.xs, ~self._win_crossed,
+                          self._win_waiting.copy(), self.period is not None,
+                          0.0 if self.period is None else float(self.period), UPSTREAM_M,
+                          self._win_crossed, self._win_waiting)
         if t >= self._win_start + self.long_s - 1e-9:
             blocked = ~self._win_crossed & self._win_waiting
             for k in np.flatnonzero(blocked):

@@ -47,12 +47,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
 from scipy.spatial import cKDTree
 
 from controllers.neighbours import tree_points
+from cosim.metrics import kernels as K
 from cosim.metrics.capacity import interval_drift, is_stationary
-from cosim.metrics.jams import align
+from cosim.metrics.jams import UNALIGNED, align
 
 
 @dataclass
@@ -73,30 +73,25 @@ class StepState:
     edge_left: np.ndarray
     is_static: np.ndarray | None = None  # bool: a stopped obstacle (collisions only)
     desired: np.ndarray | None = None  # desired speed, m/s (NaN: unknown)
+    #: each vehicle's row in the previous step (:func:`cosim.metrics.jams.align` of its ids
+    #: and these; None: the same vehicles at the same rows), when the caller that feeds
+    #: every step to every recorder computed it once for all; else UNALIGNED
+    prev_rows: object = UNALIGNED
 
 
 GAP_REACH_M = 150.0  # reach of the leader and side search, m (distance in (s, d))
+_NO_VALUES = np.zeros(0)  # placeholders for the kernels' unused arguments
+_NO_ROWS = np.zeros(0, dtype=np.int64)
+_NO_COUNTS = np.zeros(0, dtype=np.int64)
 
 
 def overlapping_pairs(st: StepState, period: float | None) -> np.ndarray:
     """Pairs (i < j) of vehicles whose rectangles overlap (strictly), (P, 2).
 
-    The candidates are the pairs within ``hypot(max length, max width)`` (m) of each
-    other, as scipy's cKDTree finds them (:func:`_pairs_within`, a sweep along ``s``).
-    With two or more overlaps the pairs come from the tree itself
+    A sweep along ``s`` (:func:`~cosim.metrics.kernels.pair_sweep`) finds every such
+    pair; with two or more the pairs come from scipy's cKDTree
     (:func:`_overlapping_pairs_tree`), in its order, which the collision log keeps."""
-    if len(st.s) < 2:
-        return np.empty((0, 2), dtype=np.int64)
-    if not _fast_ok(st):
-        return _overlapping_pairs_tree(st, period)
-    reach = float(np.hypot(st.length.max(), st.width.max()))
-    px, py, box_y = _points(st, reach, period)
-    cand = _pairs_within(px, py, reach, period is not None, _period(period), box_y)
-    pairs = _overlaps(cand, st.s, st.d, st.length, st.width, period is not None,
-                      _period(period))
-    if len(pairs) >= 2:
-        return _overlapping_pairs_tree(st, period)
-    return pairs
+    return overlaps_and_gaps(st, period, with_gaps=False)[0]
 
 
 def gaps(st: StepState, period: float | None, lateral_overlap_margin_m: float = 0.0):
@@ -114,23 +109,37 @@ def gaps_and_leaders(
     smallest bumper gap (the one ``g_long[i]`` is measured to), -1 if none within
     the 150 m reach.
 
-    The pairs within the reach are those scipy's cKDTree finds (:func:`_pairs_within`).
-    Of two leaders at the same gap, one with a higher index than the follower wins; which
-    of several such (or, without one, of several lower ones) depends on the tree's order:
-    then the tree decides (:func:`_gaps_and_leaders_tree`)."""
+    The pairs within the reach are those scipy's cKDTree finds (the sweep of
+    :func:`~cosim.metrics.kernels.pair_sweep` applies its test). Of two leaders at the
+    same gap, one with a higher index than the follower wins; which of several such (or,
+    without one, of several lower ones) depends on the tree's order: then the tree decides
+    (:func:`_gaps_and_leaders_tree`)."""
+    return overlaps_and_gaps(st, period, True, lateral_overlap_margin_m)[1]
+
+
+def overlaps_and_gaps(st: StepState, period: float | None, with_gaps: bool = True,
+                      lateral_overlap_margin_m: float = 0.0):
+    """:func:`overlapping_pairs` and, if ``with_gaps``, :func:`gaps_and_leaders` (else
+    None), from one sort and one sweep along the road (what the recorder needs each step).
+    Non-finite or non-float64 inputs take the tree paths."""
     n = len(st.s)
+    margin = float(lateral_overlap_margin_m)
     if n < 2 or not _fast_ok(st):
-        return _gaps_and_leaders_tree(st, period, lateral_overlap_margin_m)
-    reach = GAP_REACH_M
-    px, py, box_y = _points(st, reach, period)
-    cand = _pairs_within(px, py, reach, period is not None, _period(period), box_y)
-    g_long, g_side, leader, tied = _gaps_kernel(
-        cand, st.s, st.d, st.length, st.width, period is not None, _period(period),
-        float(lateral_overlap_margin_m),
-    )
+        pairs = _overlapping_pairs_tree(st, period)
+        gaps_ = _gaps_and_leaders_tree(st, period, margin) if with_gaps else None
+        return pairs, gaps_
+    reach_ov = float(np.hypot(st.length.max(), st.width.max()))
+    px, py, box_y = _points(st, GAP_REACH_M, period)
+    pairs, n_pairs, g_long, g_side, leader, tied = K.pair_sweep(
+        px, py, st.s, st.d, st.length, st.width, period is not None, _period(period), box_y,
+        reach_ov, bool(with_gaps), GAP_REACH_M, margin)
+    if n_pairs >= 2:
+        pairs = _overlapping_pairs_tree(st, period)
+    if not with_gaps:
+        return pairs, None
     if tied:
-        return _gaps_and_leaders_tree(st, period, lateral_overlap_margin_m)
-    return g_long, g_side, leader
+        return pairs, _gaps_and_leaders_tree(st, period, margin)
+    return pairs, (g_long, g_side, leader)
 
 
 def _fast_ok(st: StepState) -> bool:
@@ -139,21 +148,7 @@ def _fast_ok(st: StepState) -> bool:
     arrs = (st.s, st.d, st.length, st.width)
     return all(
         isinstance(a, np.ndarray) and a.dtype == np.float64 and a.ndim == 1 for a in arrs
-    ) and _all_finite(st.s, st.d, st.length, st.width)
-
-
-@njit(cache=True)
-def _all_finite(s, d, length, width):
-    """True if the four (M,) arrays hold no NaN or inf."""
-    return _finite(s) and _finite(d) and _finite(length) and _finite(width)
-
-
-@njit(cache=True, inline="always")
-def _finite(a):
-    for x in a:
-        if not np.isfinite(x):
-            return False
-    return True
+    ) and K.all_finite(st.s, st.d, st.length, st.width)
 
 
 def _period(period: float | None) -> float:
@@ -167,146 +162,6 @@ def _points(st: StepState, reach: float, period: float | None):
         return np.ascontiguousarray(st.s), np.ascontiguousarray(st.d), 0.0
     pts, box = tree_points(np.column_stack([st.s, st.d]), reach, period)
     return np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]), float(box[1])
-
-
-@njit(cache=True, inline="always")
-def _tree_within(xi, yi, xj, yj, r2, periodic, period, box_y):
-    """cKDTree's test of ``query_pairs`` for points (xi, yi), (xj, yj): squared distance
-    (wrapped per axis on a ring, as its ``boxsize`` wraps) ``<= r^2``."""
-    dx = xi - xj
-    dy = yi - yj
-    if periodic:
-        hb = 0.5 * period
-        if dx < -hb:
-            dx = period + dx
-        elif dx > hb:
-            dx = dx - period
-        hby = 0.5 * box_y
-        if dy < -hby:
-            dy = box_y + dy
-        elif dy > hby:
-            dy = dy - box_y
-    return dx * dx + dy * dy <= r2
-
-
-@njit(cache=True)
-def _pairs_within(px, py, reach, periodic, period, box_y):
-    """The pairs (i < j) cKDTree's ``query_pairs(reach)`` returns for the points
-    (``px``, ``py``) (M,) m, as a set: (P, 2) int64, in sweep order (not the tree's).
-
-    A sweep along ``px`` sorted, each point against the next ones within a window a
-    little wider than the reach (then the tree's own test); on a ring (``periodic``,
-    ``px`` in [0, period)) also across the seam, each pair once. Two passes: count, fill."""
-    order = np.argsort(px)
-    xs = px[order]
-    ys = py[order]
-    out = np.empty((0, 2), np.int64)
-    cnt = _sweep(xs, ys, order, reach, periodic, period, box_y, out, False)
-    out = np.empty((cnt, 2), np.int64)
-    _sweep(xs, ys, order, reach, periodic, period, box_y, out, True)
-    return out
-
-
-@njit(cache=True)
-def _sweep(xs, ys, order, reach, periodic, period, box_y, out, fill):
-    """:func:`_pairs_within` over points sorted by ``xs``: the number of pairs, written to
-    ``out`` (P, 2) if ``fill``."""
-    n = xs.shape[0]
-    r2 = reach * reach
-    win = reach * (1.0 + 1e-9) + 1e-6
-    cnt = 0
-    for p in range(n):
-        xp, yp = xs[p], ys[p]
-        for q in range(p + 1, n):
-            if xs[q] - xp > win:
-                break
-            if _tree_within(xp, yp, xs[q], ys[q], r2, periodic, period, box_y):
-                if fill:
-                    out[cnt, 0] = min(order[p], order[q])
-                    out[cnt, 1] = max(order[p], order[q])
-                cnt += 1
-        if periodic:
-            for q in range(p):  # ahead across the seam
-                if (xs[q] - xp) + period > win:
-                    break
-                if xp - xs[q] <= win:  # q's own sweep found this pair
-                    continue
-                if _tree_within(xp, yp, xs[q], ys[q], r2, periodic, period, box_y):
-                    if fill:
-                        out[cnt, 0] = min(order[p], order[q])
-                        out[cnt, 1] = max(order[p], order[q])
-                    cnt += 1
-    return cnt
-
-
-@njit(cache=True, inline="always")
-def _wrap_ds(ds, periodic, period):
-    """``(ds + period / 2) % period - period / 2`` on a ring (numpy's float ``%``), else
-    ``ds``. ``%`` returns its operand unchanged in [0, period): skipped there."""
-    if periodic:
-        x = ds + 0.5 * period
-        if not (0.0 <= x < period):
-            x = x % period
-        return x - 0.5 * period
-    return ds
-
-
-@njit(cache=True)
-def _overlaps(cand, s, d, length, width, periodic, period):
-    """The candidate pairs (P, 2) whose rectangles overlap strictly, (Q, 2) int64."""
-    keep = np.zeros(cand.shape[0], np.bool_)
-    for k in range(cand.shape[0]):
-        i, j = cand[k, 0], cand[k, 1]
-        ds = _wrap_ds(s[j] - s[i], periodic, period)
-        keep[k] = (abs(ds) < 0.5 * (length[i] + length[j])) and (
-            abs(d[j] - d[i]) < 0.5 * (width[i] + width[j]))
-    return cand[keep]
-
-
-@njit(cache=True)
-def _gaps_kernel(cand, s, d, length, width, periodic, period, margin):
-    """Gaps, side clearances and leaders over the candidate pairs (P, 2), both ways each:
-    (g_long, g_side (M,) m, leader (M,), tied). ``tied``: some follower has two leaders at
-    its smallest gap on the same side of its index (the tree's order would decide)."""
-    n = s.shape[0]
-    g_long = np.full(n, np.inf)
-    g_side = np.full(n, np.inf)
-    leader = np.full(n, -1, np.int64)
-    n_hi = np.zeros(n, np.int64)  # leaders at the smallest gap with an index above
-    n_lo = np.zeros(n, np.int64)  # ... and below the follower's
-    for k in range(cand.shape[0]):
-        for way in range(2):
-            if way == 0:
-                a, b = cand[k, 0], cand[k, 1]
-            else:
-                a, b = cand[k, 1], cand[k, 0]
-            ds = _wrap_ds(s[b] - s[a], periodic, period)
-            half_l = 0.5 * (length[a] + length[b])
-            half_w = 0.5 * (width[a] + width[b])
-            dd = abs(d[b] - d[a])
-            lat = dd < half_w + margin
-            if ds > 0 and lat:
-                g = ds - half_l
-                if g < g_long[a]:
-                    g_long[a] = g
-                    leader[a] = b
-                    n_hi[a] = 1 if b > a else 0
-                    n_lo[a] = 0 if b > a else 1
-                elif g == g_long[a]:
-                    if b > a:
-                        n_hi[a] += 1
-                        leader[a] = b
-                    else:  # a leader above, if any, stays first
-                        n_lo[a] += 1
-            if abs(ds) < half_l and not lat:
-                gs = dd - half_w
-                if gs < g_side[a]:
-                    g_side[a] = gs
-    tied = False
-    for a in range(n):
-        if n_hi[a] >= 2 or (n_hi[a] == 0 and n_lo[a] >= 2):
-            tied = True
-    return g_long, g_side, leader, tied
 
 
 # ------------------------------------------------------------------ tree reference
@@ -456,7 +311,12 @@ class TrafficRecorder:
 
     # --------------------------------------------------------------------------
     def record(self, st: StepState, sumo_collisions: list[tuple[str, str]]) -> None:
-        """Add one step (state after the step at time ``st.t``)."""
+        """Add one step (state after the step at time ``st.t``).
+
+        The per-vehicle arithmetic runs in two compiled passes
+        (:func:`~cosim.metrics.kernels.traffic_tallies`,
+        :func:`~cosim.metrics.kernels.gap_tallies`); what they return is accumulated here
+        as the numpy version accumulated it (the same bits)."""
         t = st.t
         measuring = t > self.warmup_s + 1e-9
         if measuring and (self._acc is None or t > self._acc.t0 + self.interval_s + 1e-9):
@@ -464,63 +324,82 @@ class TrafficRecorder:
             start = self.warmup_s if self._acc is None else self._acc.t0 + self.interval_s
             self._acc = IntervalAccumulator(t0=start, crossings=np.zeros(len(self.xs), int))
         acc = self._acc if measuring else None
-        static = np.zeros(len(st.s), dtype=bool) if st.is_static is None else st.is_static
-        traffic = ~static
-        self.vehicle_steps += int(np.count_nonzero(traffic))
-
-        # Edie sums in the zone (each vehicle spends dt in this step).
-        z0, z1 = self.zone
-        in_zone = (st.s >= z0) & (st.s < z1) & traffic
-        if acc is not None:
-            acc.tts_s += self.dt * int(np.count_nonzero(in_zone))
-            acc.ttd_m += self.dt * float(np.sum(st.v[in_zone]))
-            if st.desired is not None:
-                for kind, mask in (("cav", st.is_cav), ("hdv", ~st.is_cav)):
-                    sel = in_zone & mask & np.isfinite(st.desired)
-                    self._shortfall[kind][0] += float(np.sum(st.desired[sel] - st.v[sel]))
-                    self._shortfall[kind][1] += int(np.count_nonzero(sel))
-
-        # Cross-section counts (front bumper passes x between steps).
+        n = len(st.s)
+        static = np.zeros(n, dtype=bool) if st.is_static is None else st.is_static
         ids = list(st.ids)  # a copy: kept for the next step
-        if acc is not None and len(self.xs):
-            idx = align(self._prev_ids, ids)  # None: the same vehicles in the same rows
-            if idx is None:
-                prev = self._prev_front
-            else:
-                prev = np.where(idx >= 0, self._prev_front[np.maximum(idx, 0)], np.nan) \
-                    if len(self._prev_front) else np.full(len(ids), np.nan)
-            ok = ~np.isnan(prev)
-            cur = st.s_front[ok]
-            prv = prev[ok]
-            if self.period is not None:
-                wrapped = cur < prv - 0.5 * self.period
-                cur = np.where(wrapped, cur + self.period, cur)
-                for k, x in enumerate(self.xs):
-                    acc.crossings[k] += int(
-                        np.count_nonzero((prv < x) & (cur >= x))
-                        + np.count_nonzero((prv < x + self.period) & (cur >= x + self.period))
-                    )
-            else:
-                for k, x in enumerate(self.xs):
-                    acc.crossings[k] += int(np.count_nonzero((prv < x) & (cur >= x)))
+        # cross-section counts (a front passes x between steps) are added in place
+        count = acc is not None and len(self.xs) > 0
+        idx = None
+        if count:
+            idx = align(self._prev_ids, ids) if st.prev_rows is UNALIGNED else st.prev_rows
+        (n_traffic, n_zone, ttd, sf_cav, n_sf_cav, sf_hdv, n_sf_hdv, out, n_out, n_out_cav,
+         exc_max) = K.traffic_tallies(
+            st.s, st.s_front, st.d, st.v, st.width, st.is_cav, static,
+            _NO_VALUES if st.desired is None else st.desired, st.desired is not None,
+            st.edge_right, st.edge_left, float(self.zone[0]), float(self.zone[1]),
+            acc is not None, count, self._prev_front, _NO_ROWS if idx is None else idx,
+            idx is None, self.xs, self.period is not None, _period(self.period),
+            acc.crossings if count else _NO_COUNTS)
+        self.vehicle_steps += int(n_traffic)
         self._prev_ids = ids
         self._prev_front = np.asarray(st.s_front, dtype=float)
 
+        # Edie sums in the zone (each vehicle spends dt in this step).
+        if acc is not None:
+            acc.tts_s += self.dt * int(n_zone)
+            acc.ttd_m += self.dt * float(ttd)
+            if st.desired is not None:
+                self._shortfall["cav"][0] += float(sf_cav)
+                self._shortfall["cav"][1] += int(n_sf_cav)
+                self._shortfall["hdv"][0] += float(sf_hdv)
+                self._shortfall["hdv"][1] += int(n_sf_hdv)
+
         # Boundary violations (body outside the edges).
-        excursion = np.maximum(
-            st.edge_right - (st.d - 0.5 * st.width), (st.d + 0.5 * st.width) - st.edge_left
-        )
-        out = (excursion > 1e-6) & traffic
-        if out.any():
-            self.boundary_vehicle_steps += int(np.count_nonzero(out))
-            self.boundary_vehicle_steps_cav += int(np.count_nonzero(out & st.is_cav))
+        if n_out:
+            self.boundary_vehicle_steps += int(n_out)
+            self.boundary_vehicle_steps_cav += int(n_out_cav)
             self._boundary_ids.update(np.asarray(st.ids, dtype=object)[out].tolist())
-            self.worst_excursion_m = max(self.worst_excursion_m, float(excursion.max()))
+            self.worst_excursion_m = max(self.worst_excursion_m, float(exc_max))
             if acc is not None:
-                acc.boundary_vehicle_steps += int(np.count_nonzero(out))
+                acc.boundary_vehicle_steps += int(n_out)
 
         # Collisions: geometric new overlaps and SUMO's list.
-        pairs = overlapping_pairs(st, self.period)
+        pairs, gaps_ = overlaps_and_gaps(st, self.period, with_gaps=measuring)
+        if len(pairs) or self._prev_overlaps:
+            self._new_overlaps(st, pairs, acc)
+        if sumo_collisions or self._prev_sumo:
+            self._new_sumo_collisions(st, sumo_collisions, acc)
+
+        # Gaps, headways, TTC (Minderhoud & Bovy's TET/TIT); an obstacle follows nobody.
+        if measuring:
+            g_long, g_side, leader = gaps_
+            (n_traffic, ttc_min, n_cav, ttc_cav_min, n_exposed, tit, gap_min, cav_gap_min,
+             n_finite, n_cav_finite, hw, side_min, n_side) = K.gap_tallies(
+                g_long, g_side, leader, np.asarray(st.v, dtype=float), st.is_cav, static,
+                float(self.ttc_threshold_s))
+            self.measured_vehicle_s += self.dt * int(n_traffic)
+            if n:
+                self.min_ttc_s = min(self.min_ttc_s, float(ttc_min))
+                if n_cav:
+                    self.min_cav_ttc_s = min(self.min_cav_ttc_s, float(ttc_cav_min))
+                if n_exposed:
+                    self.tet_veh_s += self.dt * int(n_exposed)
+                    self.tit_veh_s2 += self.dt * float(tit)
+            if n_finite:
+                self.min_gap_m = min(self.min_gap_m, float(gap_min))
+                if n_cav_finite:
+                    self.min_cav_gap_m = min(self.min_cav_gap_m, float(cav_gap_min))
+                if acc is not None:
+                    acc.min_gap_m = min(acc.min_gap_m, float(gap_min))
+                    acc.headways_s.append(hw)
+            if n_side:
+                self.min_side_clearance_m = min(self.min_side_clearance_m, float(side_min))
+                if acc is not None:
+                    acc.min_side_clearance_m = min(acc.min_side_clearance_m, float(side_min))
+
+    def _new_overlaps(self, st: StepState, pairs: np.ndarray,
+                      acc: IntervalAccumulator | None) -> None:
+        """Count and log the overlapping pairs (P, 2) that did not overlap in the last step."""
         now = set()
         for a, b in pairs:
             key = tuple(sorted((st.ids[a], st.ids[b])))
@@ -529,12 +408,16 @@ class TrafficRecorder:
                 kind = "cav" if (st.is_cav[a] or st.is_cav[b]) else "hdv_only"
                 self.collisions_geom[kind] += 1
                 self.collision_log.append(
-                    {"t_s": t, "source": "geometric", "a": key[0], "b": key[1], "kind": kind}
-                )
+                    {"t_s": st.t, "source": "geometric", "a": key[0], "b": key[1],
+                     "kind": kind})
                 if acc is not None:
                     acc.collisions_geom += 1
         self._prev_overlaps = now
-        # SUMO lists a pair in every step it overlaps: count only pairs that start to.
+
+    def _new_sumo_collisions(self, st: StepState, sumo_collisions: list[tuple[str, str]],
+                             acc: IntervalAccumulator | None) -> None:
+        """Count and log SUMO's pairs that start to collide (SUMO lists a pair in every step
+        it overlaps)."""
         sumo_now = {tuple(sorted(pair)) for pair in sumo_collisions}
         new_sumo = sorted(sumo_now - self._prev_sumo)
         self._prev_sumo = sumo_now
@@ -543,49 +426,10 @@ class TrafficRecorder:
         for a, b in new_sumo:
             kind = "cav" if (a in cav_set or b in cav_set) else "hdv_only"
             self.collisions_sumo[kind] += 1
-            self.collision_log.append({"t_s": t, "source": "sumo", "a": a, "b": b, "kind": kind})
+            self.collision_log.append(
+                {"t_s": st.t, "source": "sumo", "a": a, "b": b, "kind": kind})
             if acc is not None:
                 acc.collisions_sumo += 1
-
-        # Gaps and headways.
-        if measuring:
-            g_long, g_side, leader = gaps_and_leaders(st, self.period)
-            g_long = np.where(traffic, g_long, np.inf)  # an obstacle follows nobody
-            g_side = np.where(traffic, g_side, np.inf)
-            self._record_ttc(g_long, st, leader, traffic)
-            finite = np.isfinite(g_long)
-            if finite.any():
-                self.min_gap_m = min(self.min_gap_m, float(g_long[finite].min()))
-                cav_f = finite & st.is_cav
-                if cav_f.any():
-                    self.min_cav_gap_m = min(self.min_cav_gap_m, float(g_long[cav_f].min()))
-                moving = finite & (st.v > 1.0)
-                hw = g_long[moving] / st.v[moving]
-                if acc is not None:
-                    acc.min_gap_m = min(acc.min_gap_m, float(g_long[finite].min()))
-                    acc.headways_s.append(hw)
-            fs = np.isfinite(g_side)
-            if fs.any():
-                self.min_side_clearance_m = min(self.min_side_clearance_m, float(g_side[fs].min()))
-                if acc is not None:
-                    acc.min_side_clearance_m = min(
-                        acc.min_side_clearance_m, float(g_side[fs].min())
-                    )
-
-    def _record_ttc(self, g_long: np.ndarray, st: StepState, leader: np.ndarray,
-                    traffic: np.ndarray) -> None:
-        """TTC minimum and Minderhoud & Bovy's TET/TIT over one measured step."""
-        self.measured_vehicle_s += self.dt * int(np.count_nonzero(traffic))
-        ttc = time_to_collision(g_long, st.v, leader)
-        if not len(ttc):
-            return
-        self.min_ttc_s = min(self.min_ttc_s, float(ttc.min()))
-        if st.is_cav.any():
-            self.min_cav_ttc_s = min(self.min_cav_ttc_s, float(ttc[st.is_cav].min()))
-        exposed = ttc <= self.ttc_threshold_s
-        if exposed.any():
-            self.tet_veh_s += self.dt * int(np.count_nonzero(exposed))
-            self.tit_veh_s2 += self.dt * float(np.sum(self.ttc_threshold_s - ttc[exposed]))
 
     # --------------------------------------------------------------------------
     def _close_interval(self) -> None:

@@ -64,6 +64,7 @@ import numpy as np
 
 from controllers.observation import RoadProfile
 from cosim.errors import ConfigError, NetworkError
+from cosim.road import frame_kernels as FK
 
 #: Spacing (m) of the per-lane tables of ``s`` and of the road-edge samples.
 SAMPLE_M = 1.0
@@ -469,6 +470,12 @@ class RoadNetwork:
         pos = np.asarray(pos_m, dtype=float)
         lat = np.asarray(lat_m, dtype=float)
         k = self.lane_keys(lanes) if keys is None else keys
+        tb = self.tables
+        if tb.par is not None and tb.measure is not None and len(k):  # parallel lanes
+            s, d, ok = FK.parallel_frame(k, pos, lat, tb.par, tb.par_s0, tb.par_d0,
+                                         tb.measure.periodic, float(tb.measure.s_period))
+            if ok:
+                return s, d
         s = np.full(len(k), np.nan)
         d = lat.astype(float, copy=True)
         ok = k >= 0
@@ -490,11 +497,16 @@ class RoadNetwork:
         pos = np.asarray(pos_m, dtype=float)
         d = np.asarray(d_m, dtype=float)
         k = self.lane_keys(lanes) if keys is None else keys
+        tb = self.tables
+        if tb.par is not None and len(k):  # every lane reached parallel to the line
+            lat, ok = FK.parallel_lateral(k, pos, d, tb.lane_len, tb.next_lane, tb.par,
+                                          tb.par_d0)
+            if ok:
+                return lat
         lat = d.astype(float, copy=True)
         ok = k >= 0
         if not ok.any():
             return lat
-        tb = self.tables
         kk, dd = k[ok], d[ok]
         pp = pos[ok]
         if tb.par[kk].all() and (pp <= tb.lane_len[kk]).all():

@@ -55,7 +55,8 @@ class StepData:
     Attributes:
         k: step number (0 is the first step); t: time after the step, s.
         state: all vehicles after the step.
-        cav_rows: (N,) rows of the controlled CAVs in ``state``; cav_ids: their ids.
+        cav_rows: (N,) rows of the controlled CAVs in ``state``; cav_ids: their ids;
+            controlled: (M,) bool, the same as a mask.
         obs: the CAVs' observation.
         u_law: (N, 2) the law's command, m/s^2; u: after constraints and safety.
         v_next, d_next, v_lat_next: (N,) the commands applied, m/s, m, m/s.
@@ -65,6 +66,7 @@ class StepData:
     t: float = 0.0
     state: RoadSnapshot | None = None
     cav_rows: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.intp))
+    controlled: np.ndarray | None = None
     cav_ids: list = field(default_factory=list)
     obs: Observation | None = None
     u_law: np.ndarray | None = None
@@ -190,17 +192,20 @@ class Loop:
         st.state = state
         if self.law is None:
             return
-        rows = np.flatnonzero(state.is_cav & state.on_main & ~state.is_static)
+        controlled = state.is_cav & state.on_main & ~state.is_static
+        rows = np.flatnonzero(controlled)
         st.cav_rows = rows
+        st.controlled = controlled
         if len(rows):
             all_ids = state.ids
-            st.cav_ids = list(map(all_ids.__getitem__, rows.tolist()))
+            st.cav_ids = (list(all_ids) if len(rows) == len(all_ids)  # every vehicle
+                          else list(map(all_ids.__getitem__, rows.tolist())))
             self.world.take_over(st.cav_ids)
 
     def _reference(self, st: StepData) -> None:
         state, rows = st.state, st.cav_rows
-        others = np.flatnonzero(~(state.is_cav & state.on_main & ~state.is_static)
-                                & np.isfinite(state.s))
+        others = (_NO_ROWS if len(rows) == state.n  # every vehicle is a controlled CAV
+                  else np.flatnonzero(~st.controlled & np.isfinite(state.s)))
         q = _pair(state.s, state.d, rows)
         p = _pair(state.v, state.v_lat, rows)
         desired = state.desired[rows]
@@ -215,7 +220,8 @@ class Loop:
             others_q=_pair(state.s, state.d, others),
             others_p=_pair(state.v, state.v_lat, others),
             others_length=state.length[others], others_width=state.width[others],
-            others_ids=_objects(list(map(all_ids.__getitem__, others.tolist()))),
+            others_ids=_objects(list(map(all_ids.__getitem__, others.tolist()))
+                                if len(others) else []),
             road_edges=edges, period_s=self.world.period, desired_speed=desired,
             road=self.world.road,
         )
@@ -278,7 +284,10 @@ class Loop:
         st.d_next = obs.q[:, 1] + st.v_lat_next * self.dt
 
     def _apply(self, st: StepData) -> None:
-        self.world.apply(st.obs.ids.tolist(), st.v_next, st.d_next, st.v_lat_next)
+        self.world.apply(st.cav_ids, st.v_next, st.d_next, st.v_lat_next, rows=st.cav_rows)
+
+
+_NO_ROWS = np.zeros(0, dtype=np.intp)
 
 
 def _pair(a: np.ndarray, b: np.ndarray, rows: np.ndarray) -> np.ndarray:

@@ -15,8 +15,9 @@ import pandas as pd
 
 from controllers import protocol
 from cosim.metrics import capacity as cap
+from cosim.metrics import kernels as K
 from cosim.metrics.flock import flock_metrics
-from cosim.metrics.jams import JamRecorder, align
+from cosim.metrics.jams import UNALIGNED, JamRecorder, align
 from cosim.metrics.traffic import StepState, TrafficRecorder
 from cosim.sim.loop import Loop, StepData
 
@@ -25,6 +26,8 @@ FLOCK_SAMPLE_S = 1.0  # s between flock-metric samples
 HARSH_ACCEL_MPS2 = 3.0
 #: How often the capacity recorder asks the world for its pending insertions, s.
 PENDING_SAMPLE_S = 1.0
+_NO_VALUES = np.zeros(0)  # placeholders for the kernels' unused arguments
+_NO_ROWS = np.zeros(0, dtype=np.int64)
 
 
 def step_state(st: StepData, road) -> StepState:
@@ -61,6 +64,7 @@ class Recorders:
     departed: set = field(default_factory=set)
     arrived: set = field(default_factory=set)
     max_pending: int = 0
+    prev_ids: list = field(default_factory=list)  # the vehicles of the last recorded step
 
     def flock_table(self) -> pd.DataFrame:
         return pd.DataFrame(self.flock_rows)
@@ -83,8 +87,11 @@ def attach_recorders(loop: Loop, traffic: TrafficRecorder, jams: JamRecorder, *,
         rec.departed.update(world.departed_now)
         rec.arrived.update(world.arrived_now)
         ss = step_state(st, world.road)
+        # every recorder sees every step: their previous vehicles are these, aligned once
+        ss.prev_rows = align(rec.prev_ids, ss.ids)
+        rec.prev_ids = ss.ids
         traffic.record(ss, world.collisions())
-        jams.record(st.t, ss.ids, ss.s_front, ss.v, ss.is_static)
+        jams.record(st.t, ss.ids, ss.s_front, ss.v, ss.is_static, prev_rows=ss.prev_rows)
         if capacity is not None:
             new = [v for v in world.departed_now if v != loop.obstacle_id]
             capacity.record(ss, world.pending, len(new))
@@ -140,8 +147,9 @@ class CapacityRecorder:
     * over the whole run: the distance driven by CAVs (km), the base of the safety layer's
       activations per vehicle-km (the safety layer counts over the whole run too).
 
-    Per-step cost: a few vectorised masks, and when the vehicles changed one C-level
-    dictionary look-up per vehicle (:func:`cosim.metrics.jams.align`).
+    Per-step cost: one compiled pass over the vehicles, and when the vehicles changed one
+    C-level dictionary look-up per vehicle (:func:`cosim.metrics.jams.align`, shared by the
+    recorders of a run through ``StepState.prev_rows``).
 
     Args:
         dt: step, s. layout: zones and cross-sections. warmup_s: start of the measured
@@ -158,7 +166,11 @@ class CapacityRecorder:
         self.bin_s = float(bin_s)
         n_bins = int(np.ceil(duration_s / bin_s)) + 1
         self.zones = layout.zones
-        self._sums = {name: np.zeros((3, n_bins)) for name in self.zones}  # tts, ttd, tdd
+        # per zone: tts, ttd, tdd by bin (views of one array the kernel adds to)
+        self._sums_all = np.zeros((len(self.zones), 3, n_bins))
+        self._sums = {name: self._sums_all[z] for z, name in enumerate(self.zones)}
+        self._zone_bounds = np.array([self.zones[name] for name in self.zones],
+                                     dtype=float).reshape(len(self.zones), 2)
         self.pending = np.zeros(n_bins)
         self.inserted = np.zeros(n_bins)
         self.demand_vph = float(demand_vph)
@@ -176,69 +188,36 @@ class CapacityRecorder:
 
     def record(self, ss: StepState, pending=None, n_departed: int = 0) -> None:
         """Add one step; ``pending()`` returns the vehicles waiting to be inserted,
-        ``n_departed`` the vehicles inserted in this step."""
+        ``n_departed`` the vehicles inserted in this step. The per-vehicle arithmetic is one
+        compiled pass (:func:`cosim.metrics.kernels.capacity_tallies`)."""
         t = ss.t
         self.t_end_s = t
         b = min(int((t - 0.5 * self.dt) // self.bin_s), self.pending.shape[0] - 1)
         self._n_inserted += int(n_departed)
         self.inserted[b] = self._n_inserted
-        static = np.zeros(len(ss.s), dtype=bool) if ss.is_static is None else ss.is_static
-        traffic = ~static
-        desired = (np.full(len(ss.s), np.nan) if ss.desired is None
-                   else np.asarray(ss.desired, dtype=float))
-        known = np.isfinite(desired)
-        all_known = bool(known.all())
-        for name, (z0, z1) in self.zones.items():
-            m = (ss.s >= z0) & (ss.s < z1)
-            m &= traffic
-            n_in = int(np.count_nonzero(m))
-            if n_in:
-                sums = self._sums[name]
-                mk = m if all_known else m & known
-                sums[0, b] += self.dt * n_in
-                sums[1, b] += self.dt * float(ss.v[mk].sum())
-                sums[2, b] += self.dt * float(desired[mk].sum())
+        n = len(ss.s)
+        static = np.zeros(n, dtype=bool) if ss.is_static is None else ss.is_static
+        ids = list(ss.ids)  # a copy: kept for the next step
+        idx = align(self._prev_ids, ids) if ss.prev_rows is UNALIGNED else ss.prev_rows
+        (sec, frac, harsh_cav, n_cav, harsh_hdv, n_hdv, cav_speed, any_seen) = \
+            K.capacity_tallies(
+                ss.s, ss.s_front, ss.v, ss.is_cav, static,
+                _NO_VALUES if ss.desired is None else np.asarray(ss.desired, dtype=float),
+                ss.desired is not None, self._zone_bounds, self._sums_all, b, self.dt,
+                _NO_ROWS if idx is None else idx, idx is None, self._prev_front,
+                self._prev_v, self.xs, t > self.warmup_s + 1e-9, HARSH_ACCEL_MPS2)
         if pending is not None and self._k % self._pending_every == 0:
             self.pending[b] = max(self.pending[b], float(pending()))
         self._k += 1
-
-        ids = list(ss.ids)  # a copy: kept for the next step
-        idx = align(self._prev_ids, ids)  # None: the same vehicles as in the last step
-        if idx is None:
-            seen = None
-            any_seen = len(ids) > 0
-        else:
-            seen = idx >= 0
-            any_seen = bool(seen.any())
-            idx = idx[seen]
-        if len(self.xs) and any_seen:
-            if seen is None:
-                prv, cur = self._prev_front, ss.s_front
-            else:
-                prv, cur = self._prev_front[idx], ss.s_front[seen]
-            xs = self.xs[:, None]  # (K, 1)
-            hits = (prv < xs) & (cur >= xs)  # (K, M')
-            for k in np.flatnonzero(hits.any(axis=1)):
-                hit = hits[k]
-                x = self.xs[k]
-                frac = (x - prv[hit]) / np.maximum(cur[hit] - prv[hit], 1e-9)
-                self._crossings[k].extend((t - self.dt + frac * self.dt).tolist())
-        if t > self.warmup_s + 1e-9 and any_seen:
-            if seen is None:
-                acc = (ss.v - self._prev_v) / self.dt
-                is_cav, moving = ss.is_cav, traffic
-            else:
-                acc = (ss.v[seen] - self._prev_v[idx]) / self.dt
-                is_cav, moving = ss.is_cav[seen], traffic[seen]
-            harsh = np.abs(acc) > HARSH_ACCEL_MPS2
-            cav_moving = is_cav & moving
-            hdv_moving = moving & ~is_cav
-            self.harsh["cav"][0] += int(np.count_nonzero(harsh & cav_moving))
-            self.harsh["cav"][1] += int(np.count_nonzero(cav_moving))
-            self.harsh["hdv"][0] += int(np.count_nonzero(harsh & hdv_moving))
-            self.harsh["hdv"][1] += int(np.count_nonzero(hdv_moving))
-        cav = ss.is_cav & traffic
-        self.cav_distance_m += self.dt * float(np.sum(ss.v[cav]))
+        if len(sec):
+            for k in np.unique(sec).tolist():
+                self._crossings[k].extend((t - self.dt + frac[sec == k] * self.dt).tolist())
+        if any_seen and t > self.warmup_s + 1e-9:
+            self.harsh["cav"][0] += int(harsh_cav)
+            self.harsh["cav"][1] += int(n_cav)
+            self.harsh["hdv"][0] += int(harsh_hdv)
+            self.harsh["hdv"][1] += int(n_hdv)
+        self.cav_distance_m += self.dt * float(cav_speed)
         self._prev_ids = ids
         self._prev_front = np.asarray(ss.s_front, dtype=float)
         self._prev_v = np.asarray(ss.v, dtype=float)

@@ -132,7 +132,7 @@ class RoadWorld:
         self.controlled.update(ids)
 
     def apply(self, ids: list, v_next: np.ndarray, d_next: np.ndarray,
-              v_lat_next: np.ndarray) -> None:
+              v_lat_next: np.ndarray, rows: np.ndarray | None = None) -> None:
         for vid, v, d, vl in zip(ids, v_next, d_next, v_lat_next, strict=True):
             self._cmd[vid] = (float(v), float(d), float(vl))
 

@@ -112,8 +112,10 @@ class World(Protocol):
         """From now on the loop commands these CAVs (the world stops driving them)."""
 
     def apply(self, ids: list, v_next: np.ndarray, d_next: np.ndarray,
-              v_lat_next: np.ndarray) -> None:
-        """Next speed (m/s), lateral position (m) and lateral speed (m/s) of CAVs ``ids``."""
+              v_lat_next: np.ndarray, rows: np.ndarray | None = None) -> None:
+        """Next speed (m/s), lateral position (m) and lateral speed (m/s) of CAVs ``ids``;
+        ``rows`` (N,): their rows in the last :meth:`observe` snapshot, if the caller has
+        them (a world may use them instead of looking the ids up)."""
 
     def collisions(self) -> list[tuple[str, str]]:
         """Collisions the world itself detected in the last step (pairs of ids)."""

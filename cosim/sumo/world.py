@@ -183,11 +183,16 @@ class SumoWorld:
         self._code_key = np.zeros(0, dtype=np.int64)
         self._code_main = np.zeros(0, dtype=bool)
         self._code_side = np.zeros(0, dtype=bool)
-        #: the last observation: row of each id, lane ids, table keys, lane positions (m)
-        self._row_of: dict[str, int] = {}
+        #: the last observation: ids, lane ids, table keys, lane positions and lateral lane
+        #: positions (m), and which vehicles move sideways with changeSublane (see apply)
+        self._ids: list = []
+        self._row_cache: dict[str, int] | None = None  # id -> row, built when asked
         self._lanes: tuple = ()
         self._keys = np.zeros(0, dtype=np.int64)
         self._pos = np.zeros(0)
+        self._lat = np.zeros(0)
+        self._sublane = np.zeros(0, dtype=bool)
+        self._set_fns: tuple | None = None  # (setPreviousSpeed, setSpeed, setLatPos)
         self._static_ids: list | None = None  # the vehicles of _static_cols, in order
         self._static_cols: tuple = ()
         self.departed_now: list[str] = []
@@ -293,8 +298,7 @@ class SumoWorld:
         lat = np.array(lat, dtype=float).reshape(n)
         speed = np.array(speed, dtype=float).reshape(n)
         # a controlled CAV's lateral speed is the one the loop integrated
-        v_lat_now = np.array(list(map(self.v_lat_state.get, ids, slat)),
-                             dtype=float).reshape(n)
+        v_lat_now = np.fromiter(map(self.v_lat_state.get, ids, slat), dtype=float, count=n)
         if ids != self._static_ids:
             static = self._static
             cols = np.array([static[vid] for vid in ids], dtype=float).reshape(n, 4)
@@ -304,16 +308,16 @@ class SumoWorld:
         length, width, is_cav, desired = self._static_cols
         codes = np.fromiter(map(self._lane_code.__getitem__, lane), dtype=np.int64, count=n)
         keys = self._code_key[codes]
-        self._row_of = dict(zip(ids, range(n), strict=True))
-        self._lanes, self._keys, self._pos = lane, keys, pos
+        self._ids, self._row_cache = ids, None
+        self._lanes, self._keys, self._pos, self._lat = lane, keys, pos, lat
         if self._on_ramp:
             self._release_ramp()
         # vehicles to move sideways with changeSublane (see apply): the back still on the
-        # lane before, or on an edge of several lanes; their lateral lane positions now
+        # lane before, or on an edge of several lanes
         sublane = pos < length
         if self._side_lanes:
             sublane |= self._code_side[codes]
-        self._sublane_lat = {ids[i]: float(lat[i]) for i in np.flatnonzero(sublane).tolist()}
+        self._sublane = sublane
         # (lane, position, lateral position) -> (s, d): the lanes' real geometry
         s_front, d_front = self.net.lane_frame(None, pos, lat, keys=keys)
         s = s_front - 0.5 * length
@@ -321,15 +325,23 @@ class SumoWorld:
             s = np.mod(s, self.period)
         on_main = self._code_main[codes] & ~np.isnan(s)
         is_static = np.zeros(n, dtype=bool)
-        if self.obstacle_id is not None and self.obstacle_id in self._row_of:
-            is_static[self._row_of[self.obstacle_id]] = True
+        if self.obstacle_id is not None:
+            row = self._row_of().get(self.obstacle_id)
+            if row is not None:
+                is_static[row] = True
         return RoadSnapshot(ids, s, s_front, d_front, speed, v_lat_now, length.copy(),
                             width.copy(), is_cav.copy(), on_main, is_static, desired.copy())
+
+    def _row_of(self) -> dict[str, int]:
+        """Id -> row in the last observation (built once per observation, when asked)."""
+        if self._row_cache is None:
+            self._row_cache = dict(zip(self._ids, range(len(self._ids)), strict=True))
+        return self._row_cache
 
     def _release_ramp(self) -> None:
         """Give vehicles that reached the main road back their lane-change model."""
         veh = self.ts.vehicle
-        row_of, lanes = self._row_of, self._lanes
+        row_of, lanes = self._row_of(), self._lanes
         for vid in [v for v in self._on_ramp if v not in row_of
                     or lanes[row_of[v]] in self.main_lanes]:
             self._on_ramp.discard(vid)
@@ -338,13 +350,11 @@ class SumoWorld:
 
     def take_over(self, ids: list) -> None:
         """Hand CAVs to our controller: no SUMO speed checks, no SUMO lane changes."""
-        new = set(ids).difference(self.controlled)
-        if not new:
+        controlled = self.controlled
+        if controlled.issuperset(ids):
             return
         veh = self.ts.vehicle
-        for vid in ids:
-            if vid not in new:
-                continue
+        for vid in [v for v in ids if v not in controlled]:
             veh.setSpeedMode(vid, 0)
             veh.setLaneChangeMode(vid, 0)
             # a lateral move requested with changeSublane lands in full in the step
@@ -356,8 +366,9 @@ class SumoWorld:
             self.v_lat_state.setdefault(vid, 0.0)
 
     def apply(self, ids: list, v_next: np.ndarray, d_next: np.ndarray,
-              v_lat_next: np.ndarray) -> None:
-        """Command next speeds (m/s) and lateral positions (road frame, m) of CAVs.
+              v_lat_next: np.ndarray, rows: np.ndarray | None = None) -> None:
+        """Command next speeds (m/s) and lateral positions (road frame, m) of CAVs ``ids``
+        (``rows``: their rows in the last :meth:`observe`, when the caller has them).
 
         Two kinds of CAV move sideways with ``changeSublane`` instead of
         ``setLateralLanePosition``, because only SUMO's lane changer keeps its bookkeeping
@@ -390,37 +401,43 @@ class SumoWorld:
         wrapper layer of its Python module (the same C++ calls).
         """
         veh = self.ts.vehicle
-        rows = np.fromiter(map(self._row_of.__getitem__, ids), dtype=np.int64, count=len(ids))
+        if rows is None:
+            rows = np.fromiter(map(self._row_of().__getitem__, ids), dtype=np.int64,
+                               count=len(ids))
         pos = self._pos[rows]
         v_next = np.asarray(v_next, dtype=float)
         # road-frame d -> lateral lane position where the vehicle will be after the step
         lats = self.net.lateral_lane_position(None, pos + v_next * self.dt, d_next,
                                               keys=self._keys[rows])
+        moved = self._sublane[rows]  # these CAVs move with changeSublane (a copy)
+        crossed: list = []
         if self._side_lanes:
             lanes = self._lanes
-            self._cross_lanes(ids, [lanes[r] for r in rows.tolist()], pos, v_next, d_next,
-                              lats)
-        set_prev, set_speed, set_lat = self._setters(veh)
-        sublane = self._sublane_lat
-        self._act_every_step(sublane)
+            crossed = self._cross_lanes(ids, [lanes[r] for r in rows.tolist()], pos, v_next,
+                                        d_next, lats, moved)
+        if self._set_fns is None:
+            self._set_fns = self._setters(veh)
+        set_prev, set_speed, set_lat = self._set_fns
+        if self._slow_actions:
+            self._act_every_step(crossed)
         # one C-level pass per setter (each vehicle's commands are independent of the
         # others', so the order of the calls does not matter)
         vs, lats_l = v_next.tolist(), lats.tolist()
         if self._slow_actions:
             _consume(map(set_prev, ids, vs))
         _consume(map(set_speed, ids, vs))
-        if sublane:
-            moved = np.fromiter(map(sublane.__contains__, ids), dtype=bool, count=len(ids))
+        if moved.any():
             placed = (~moved).tolist()
             _consume(map(set_lat, compress(ids, placed), compress(lats_l, placed)))
+            lat_now = self._lat[rows].tolist()
             for i in np.flatnonzero(moved).tolist():
-                veh.changeSublane(ids[i], lats_l[i] - sublane[ids[i]])
+                veh.changeSublane(ids[i], lats_l[i] - lat_now[i])
         else:
             _consume(map(set_lat, ids, lats_l))
         self.v_lat_state.update(zip(ids, np.asarray(v_lat_next, dtype=float).tolist(),
                                     strict=True))
 
-    def _act_every_step(self, sublane: dict) -> None:
+    def _act_every_step(self, crossed: list) -> None:
         """Give the CAVs that move with ``changeSublane`` this step an action step of one
         step, keep it one step more after their last such move, then give them back
         ``cav_action_step_s``.
@@ -431,11 +448,15 @@ class SumoWorld:
         distance beside a vehicle whose action step is longer than a step, in the sublanes
         its drivers see (``MSLeaderInfo::getSubLanes``): SUMO's drivers would see the CAV
         wider than it is. (The position update is the same for both action steps: with
-        ``setPreviousSpeed`` both rules give ``v_next dt``.)"""
+        ``setPreviousSpeed`` both rules give ``v_next dt``.) The CAVs that move this step are
+        the controlled ones of the last observation that move sideways with
+        ``changeSublane`` but those in ``crossed`` (moved to another lane with ``moveTo``)."""
         at_dt = self._every_step
-        if not self._slow_actions or (not sublane and not at_dt):
+        ids = self._ids
+        sublane = [ids[i] for i in np.flatnonzero(self._sublane).tolist()]
+        if not sublane and not at_dt:
             return
-        want = self.controlled.intersection(sublane)
+        want = self.controlled.intersection(sublane).difference(crossed)
         keep = want | (at_dt - want - self._clearing)
         raw = getattr(self.ts, "_libsumo", None)
         set_asl = getattr(raw, "vehicle_setActionStepLength", None) \
@@ -449,14 +470,16 @@ class SumoWorld:
         self._every_step = keep
 
     def _cross_lanes(self, ids: list, lanes: list, pos: np.ndarray, v_next: np.ndarray,
-                     d_next: np.ndarray, lats: np.ndarray) -> None:
+                     d_next: np.ndarray, lats: np.ndarray, moved: np.ndarray) -> list:
         """Move CAVs whose commanded centre ``d_next`` (m) lies on another lane of their
         edge onto that lane (``moveTo`` at their position now; SUMO keeps the speed and
         advances them in the step), and rewrite their lateral lane positions ``lats`` (m)
-        in place. A lateral lane position beyond the lane's border would leave the
-        vehicle on its old lane in SUMO's eyes: drawn across the border, unseen by the
-        drivers on the neighbouring lane, and stopped at the old lane's end."""
+        in place, and take them out of ``moved`` (N,) (placed, not moved with changeSublane, in
+        this step); returns their ids. A lateral lane position beyond the lane's border
+        would leave the vehicle on its old lane in SUMO's eyes: drawn across the border,
+        unseen by the drivers on the neighbouring lane, and stopped at the old lane's end."""
         side = self._side_lanes
+        crossed = []
         for i, lane in enumerate(lanes):
             spans = side.get(lane)
             if spans is None:
@@ -472,9 +495,11 @@ class SumoWorld:
             self.ts.vehicle.moveTo(ids[i], target[0], p)
             # placed with setLateralLanePosition in this step (changeSublane right after
             # moveTo does not land); from the next step on it moves with changeSublane
-            self._sublane_lat.pop(ids[i], None)
+            moved[i] = False
+            crossed.append(ids[i])
             lats[i] = self.net.lateral_lane_position(
                 [target[0]], np.array([p + float(v_next[i]) * self.dt]), np.array([d]))[0]
+        return crossed
 
     def _setters(self, veh):
         """``(setPreviousSpeed, setSpeed, setLateralLanePosition)``: libsumo's C functions

@@ -335,7 +335,7 @@ def case_lateral_across_joint() -> dict:
         if k >= 40:
             d_a = max(-1.0, d_a - 0.1)
         v_b = 1.0 if k > 50 and s["cav.B"] < 99.5 else 0.0
-        straddled += int("cav.A" in world._sublane_lat)
+        straddled += int(bool(world._sublane[world._ids.index("cav.A")]))
         _command(world, va, {"cav.A": v_a, "cav.B": v_b}, {"cav.A": d_a, "cav.B": 2.0})
         world.step()
         va = world.observe()

@@ -186,12 +186,11 @@ class LaneFreeFlocking:
         previous step: no memory, as when it was pruned)."""
         found = list(map(self._slot.get, ids))
         if None in found:
-            for r, k in enumerate(found):
-                if k is None:
-                    k = len(self._ids_of_slot)
-                    self._slot[ids[r]] = k
-                    self._ids_of_slot.append(ids[r])
-                    found[r] = k
+            for r in [r for r, k in enumerate(found) if k is None]:
+                k = len(self._ids_of_slot)
+                self._slot[ids[r]] = k
+                self._ids_of_slot.append(ids[r])
+                found[r] = k
             size = len(self._ids_of_slot)
             if size > len(self._mem_last):
                 grow = max(size, 2 * len(self._mem_last), 64) - len(self._mem_last)
