@@ -138,6 +138,10 @@ def assert_same_gaps(st, period, margin=0.0):
 
 
 def assert_same_overlaps(st, period):
+    if period is not None and len(st.s):  # the compiled tree coordinates are the tree's
+        px, py, box_y = traffic._points(st, 150.0, period)
+        cx, cy, cb = K.tree_points_2d(st.s, st.d, 150.0, period)
+        assert np.array_equal(cx, px) and np.array_equal(cy, py) and cb == box_y
     want = ref_overlapping_pairs(st, period)
     got = overlapping_pairs(st, period)
     assert got.dtype == want.dtype and got.shape == want.shape
@@ -201,6 +205,9 @@ def test_compiled_path_taken():
     for period in (None, 500.0, 250.0):  # 250 m: shorter than twice the reach
         st = random_state(rng, 200, 500.0 if period is None else period, 10.2, False, period)
         px, py, box_y = traffic._points(st, 150.0, period)
+        if period is not None:  # the compiled tree points are the same
+            cx, cy, cb = K.tree_points_2d(st.s, st.d, 150.0, period)
+            assert np.array_equal(cx, px) and np.array_equal(cy, py) and cb == box_y
         cand = K.pairs_within(px, py, 150.0, period is not None, traffic._period(period),
                               box_y)
         pts, box = tree_points(np.column_stack([st.s, st.d]), 150.0, period)
@@ -210,7 +217,7 @@ def test_compiled_path_taken():
         assert np.array_equal(key, np.sort(tree[:, 0] * 200 + tree[:, 1]))
         _, _, _, _, _, tied = K.pair_sweep(px, py, st.s, st.d, st.length, st.width,
                                            period is not None, traffic._period(period),
-                                           box_y, 5.0, True, 150.0, 0.0)
+                                           box_y, True, 150.0, 0.0)
         assert not tied
 
 

@@ -371,26 +371,30 @@ def wrap_ds(ds, periodic, period):
 
 
 @njit(cache=True)
-def pair_sweep(px, py, s, d, length, width, periodic, period, box_y, reach_ov, gaps,
-               reach_gap, margin):
+def pair_sweep(px, py, s, d, length, width, periodic, period, box_y, gaps, reach_gap,
+               margin):
     """Overlapping rectangles and, if ``gaps``, each vehicle's leader gap, side clearance
-    and leader, from one sweep along the road (:mod:`cosim.metrics.traffic`).
+    and leader, from one sort along the road (:mod:`cosim.metrics.traffic`).
 
-    The sweep of :func:`pairs_within` over the points (``px``, ``py``) (M,) m (the tree's
-    coordinates, box ``box_y`` m along d on a ring), with a window of ``reach_gap`` m when
-    ``gaps`` (else ``reach_ov``, at least ``hypot`` of the largest length and width, m):
-    every pair in the window whose rectangles (centres ``s``, ``d``, sizes ``length``,
-    ``width``, (M,) m) overlap strictly is an overlap, in sweep order; every pair within
-    ``reach_gap`` by cKDTree's test updates both vehicles' gaps as the pairs of
-    ``pairs_within(reach_gap)`` did, in the same order (a lateral overlap counts within
-    ``margin`` m).
+    Points (``px``, ``py``) (M,) m are the tree's coordinates (on a ring ``px`` in
+    [0, period) and a box ``box_y`` m along d); rectangles have centres ``s``, ``d`` and
+    sizes ``length``, ``width`` (M,) m. From each vehicle ``a`` (follower) the vehicles in
+    road order are scanned ahead while one of them could still be its leader (the distance
+    along the road minus half of both lengths at most the smallest gap so far, within
+    ``reach_gap`` m) or beside it (within half of both lengths), and behind while beside
+    it. A vehicle ``b`` counts for ``a``'s gaps only within ``reach_gap`` by cKDTree's test
+    (``query_pairs``, the candidates the tree code used), laterally overlapping within
+    ``margin`` m: the leader is the one ahead with the smallest bumper gap, the side
+    clearance the smallest one beside it. Every pair whose rectangles overlap strictly is
+    an overlap (they lie within half of both lengths of each other).
 
     Returns ``(overlaps (min(P, 2), 2) int64 (i < j), P, g_long (M,) m, g_side (M,) m,
     leader (M,) int64, tied)``: the first two of the P overlapping pairs (with two or more
     the caller asks cKDTree for them in its order); gaps inf and leader -1 where none (all
-    of them without ``gaps``);
-    ``tied``: some follower has two leaders at its smallest gap on the same side of its
-    index (then cKDTree's order decides: the caller falls back to it).
+    of them without ``gaps``); ``tied``: some follower has two leaders at its smallest gap
+    on the same side of its index (cKDTree's order decided which: the caller asks it).
+    Minima and the tie test do not depend on the order the vehicles are visited in, so the
+    results equal those of every pair within the reach (tests/test_metrics_exactness.py).
     """
     n = px.shape[0]
     order = np.argsort(px)
@@ -403,67 +407,96 @@ def pair_sweep(px, py, s, d, length, width, periodic, period, box_y, reach_ov, g
     n_lo = np.zeros(n, np.int64)  # ... and below the follower's
     ov = np.empty((2, 2), np.int64)
     n_ov = 0
-    reach = reach_gap if gaps and reach_gap > reach_ov else reach_ov
-    win = reach * (1.0 + 1e-9) + 1e-6
     r2 = reach_gap * reach_gap
-    cand = np.empty(n, np.int64)  # sorted rows paired with p, in sweep order
+    half_l_max = 0.0
+    for i in range(n):
+        half_l_max = max(half_l_max, 0.5 * length[i])
+    slack = 1e-6  # m: the sorted coordinates and s differ by rounding on a ring
+    half_ring = 0.5 * period * (1.0 + 1e-9) + slack
+    reach_along = reach_gap * (1.0 + 1e-9) + slack
     for p in range(n):
-        xp = xs[p]
-        m = 0
-        for q in range(p + 1, n):
-            if xs[q] - xp > win:
-                break
-            cand[m] = q
-            m += 1
-        if periodic:
-            for q in range(p):  # ahead across the seam
-                if (xs[q] - xp) + period > win:
+        a = order[p]
+        side = 0.5 * length[a] + half_l_max + slack  # beside a: |ds| below this
+        n_fwd = 0
+        for way in range(2):  # 0: ahead, 1: behind
+            for step in range(1, n):
+                q = p + step if way == 0 else p - step
+                if not periodic and (q < 0 or q >= n):
                     break
-                if xp - xs[q] <= win:  # q's own sweep found this pair
+                if way == 1 and step + n_fwd >= n:
+                    break  # the scan ahead reached these already
+                q = q % n
+                along = xs[q] - xs[p] if way == 0 else xs[p] - xs[q]
+                if along < 0:
+                    along += period
+                if periodic and along > half_ring:
+                    break
+                if way == 0:
+                    bound = side
+                    if gaps:
+                        bound = max(bound, min(g_long[a] + side, reach_along))
+                    if along > bound:
+                        break
+                    n_fwd = step
+                elif along > side:
+                    break
+                b = order[q]
+                ds = wrap_ds(s[b] - s[a], periodic, period)
+                half_l = 0.5 * (length[a] + length[b])
+                half_w = 0.5 * (width[a] + width[b])
+                dd = abs(d[b] - d[a])
+                if a < b and abs(ds) < half_l and dd < half_w:
+                    if n_ov < 2:
+                        ov[n_ov, 0] = a
+                        ov[n_ov, 1] = b
+                    n_ov += 1
+                if not gaps or not tree_within(xs[p], ys[p], xs[q], ys[q], r2, periodic,
+                                               period, box_y):
                     continue
-                cand[m] = q
-                m += 1
-        for c in range(m):
-            q = cand[c]
-            i = min(order[p], order[q])
-            j = max(order[p], order[q])
-            if gaps and tree_within(xp, ys[p], xs[q], ys[q], r2, periodic, period, box_y):
-                for way in range(2):  # follower i, then follower j
-                    a, b = (i, j) if way == 0 else (j, i)
-                    ds = wrap_ds(s[b] - s[a], periodic, period)
-                    half_l = 0.5 * (length[a] + length[b])
-                    half_w = 0.5 * (width[a] + width[b])
-                    dd = abs(d[b] - d[a])
-                    lat = dd < half_w + margin
-                    if ds > 0 and lat:
-                        g = ds - half_l
-                        if g < g_long[a]:
-                            g_long[a] = g
+                lat = dd < half_w + margin
+                if ds > 0 and lat:
+                    g = ds - half_l
+                    if g < g_long[a]:
+                        g_long[a] = g
+                        leader[a] = b
+                        n_hi[a] = 1 if b > a else 0
+                        n_lo[a] = 0 if b > a else 1
+                    elif g == g_long[a]:
+                        if b > a:
+                            n_hi[a] += 1
                             leader[a] = b
-                            n_hi[a] = 1 if b > a else 0
-                            n_lo[a] = 0 if b > a else 1
-                        elif g == g_long[a]:
-                            if b > a:
-                                n_hi[a] += 1
-                                leader[a] = b
-                            else:  # a leader above, if any, stays first
-                                n_lo[a] += 1
-                    if abs(ds) < half_l and not lat:
-                        gs = dd - half_w
-                        if gs < g_side[a]:
-                            g_side[a] = gs
-            ds = wrap_ds(s[j] - s[i], periodic, period)
-            if abs(ds) < 0.5 * (length[i] + length[j]) and (
-                    abs(d[j] - d[i]) < 0.5 * (width[i] + width[j])):
-                if n_ov < 2:
-                    ov[n_ov, 0] = i
-                    ov[n_ov, 1] = j
-                n_ov += 1
+                        else:  # a leader above, if any, stays first
+                            n_lo[a] += 1
+                if abs(ds) < half_l and not lat:
+                    gs = dd - half_w
+                    if gs < g_side[a]:
+                        g_side[a] = gs
     tied = False
     for a in range(n):
         if n_hi[a] >= 2 or (n_hi[a] == 0 and n_lo[a] >= 2):
             tied = True
     return ov[:min(n_ov, 2)].copy(), n_ov, g_long, g_side, leader, tied
+
+
+@njit(cache=True)
+def tree_points_2d(s, d, radius, period):
+    """:func:`controllers.neighbours.tree_points` of the points (``s``, ``d``) (M,) m on a
+    ring of ``period`` m: ``(px, py, box_y)``, ``px`` wrapped into [0, period) (numpy's
+    ``mod``, a value rounded up to the period set to 0), ``py = d - min(d)`` and the box
+    along d ``max(py) + 2 radius + 1`` (m)."""
+    n = s.shape[0]
+    px = np.empty(n)
+    py = np.empty(n)
+    lo = np.inf
+    for i in range(n):
+        x = s[i] % period
+        px[i] = 0.0 if x >= period else x
+        lo = min(lo, d[i])
+    hi = -np.inf
+    for i in range(n):
+        py[i] = d[i] - lo
+        hi = max(hi, py[i])
+    return px, py, hi + 2.0 * radius + 1.0
 
 
 # ------------------------------------------------------------------ capacity recorder

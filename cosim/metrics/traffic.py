@@ -128,11 +128,13 @@ def overlaps_and_gaps(st: StepState, period: float | None, with_gaps: bool = Tru
         pairs = _overlapping_pairs_tree(st, period)
         gaps_ = _gaps_and_leaders_tree(st, period, margin) if with_gaps else None
         return pairs, gaps_
-    reach_ov = float(np.hypot(st.length.max(), st.width.max()))
-    px, py, box_y = _points(st, GAP_REACH_M, period)
+    if period is None:
+        px, py, box_y = st.s, st.d, 0.0
+    else:  # the tree's coordinates (_points), compiled
+        px, py, box_y = K.tree_points_2d(st.s, st.d, GAP_REACH_M, float(period))
     pairs, n_pairs, g_long, g_side, leader, tied = K.pair_sweep(
         px, py, st.s, st.d, st.length, st.width, period is not None, _period(period), box_y,
-        reach_ov, bool(with_gaps), GAP_REACH_M, margin)
+        bool(with_gaps), GAP_REACH_M, margin)
     if n_pairs >= 2:
         pairs = _overlapping_pairs_tree(st, period)
     if not with_gaps:

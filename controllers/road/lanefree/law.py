@@ -69,6 +69,8 @@ class LaneFreeFlocking:
         # memory of the CAVs, by slot (self._slot: CAV id -> slot)
         self._slot: dict = {}
         self._ids_of_slot: list = []
+        self._last_ids: list | None = None  # the CAVs of the last step and their slots
+        self._last_slots = np.zeros(0, np.intp)
         self._mem_target = np.empty(0)  # lateral target d*, m
         self._mem_urgent = np.empty(0, bool)  # its move pays in speed (announced)
         self._mem_phase = np.empty(0, np.int64)  # replanning slot
@@ -184,6 +186,8 @@ class LaneFreeFlocking:
     def _slots(self, ids: list) -> tuple[np.ndarray, np.ndarray]:
         """Memory slots (N,) of the CAVs and which of them start afresh (N,) (absent in the
         previous step: no memory, as when it was pruned)."""
+        if ids == self._last_ids:  # the same CAVs as in the last step: none afresh
+            return self._last_slots, np.zeros(len(ids), bool)
         found = list(map(self._slot.get, ids))
         if None in found:
             for r in [r for r, k in enumerate(found) if k is None]:
@@ -201,6 +205,7 @@ class LaneFreeFlocking:
                 self._mem_last = np.concatenate([self._mem_last, np.full(grow, -2, np.int64)])
         slots = np.array(found, dtype=np.intp)
         fresh = self._mem_last[slots] != self._calls - 1
+        self._last_ids, self._last_slots = ids, slots
         return slots, fresh
 
     def _scene(self, obs: Observation, slots: np.ndarray, fresh: np.ndarray) -> _Scene:
