@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from controllers import profile_kernels as PK
+
 
 class InvalidStateError(ValueError):
     """A NaN or infinite state entered a controller; the message names the agent."""
@@ -101,6 +103,9 @@ class RoadProfile:
             out[:, 0] = self.right[0]
             out[:, 1] = self.left[0]
             return out
+        if s.ndim == 1 and s.dtype == np.float64:  # compiled (controllers.profile_kernels)
+            return PK.edges_at(s, self.s0, self.right, self.left, self.periodic,
+                               float(self.length_m))
         if self.periodic:
             s = np.mod(s, self.length_m)
         k = np.clip(np.searchsorted(self.s0, s, side="right") - 1, 0, len(self.s0) - 1)
@@ -116,10 +121,13 @@ class RoadProfile:
         pieces that ``[s, s + ahead]`` touches (and, on a ring, the same pieces one lap on).
         """
         s = np.asarray(s, dtype=float)
-        out = self.edges(s)
         if self.is_constant:
-            return out
+            return self.edges(s)
         ahead = np.broadcast_to(np.asarray(ahead_m, dtype=float), s.shape)
+        if s.ndim == 1:  # compiled (controllers.profile_kernels)
+            return PK.narrowest_over(s, np.ascontiguousarray(ahead), self.s0, self.right,
+                                     self.left, self.periodic, float(self.length_m))
+        out = self.edges(s)
         end = (s + ahead)[:, None]
         start = self.s0[None, :]
         stop = np.append(self.s0[1:], np.inf)[None, :]

@@ -34,6 +34,7 @@ import numpy as np
 from controllers import protocol
 from controllers.constraints import ActuatorLimits, Layer
 from controllers.observation import Observation
+from controllers.profile_kernels import first_wall_ahead
 from controllers.safety import RoadState, SafetyLayer
 from cosim.errors import CosimError
 from cosim.sim.world import RoadSnapshot, World
@@ -268,15 +269,11 @@ class Loop:
         road = self.world.road
         if road.is_constant:
             return None
-        ds = road.s0[None, :] - obs.q[:, 0:1]
-        if road.periodic:
-            ds = np.mod(ds, road.length_m)
-        half = 0.5 * obs.width[:, None]
-        out = (obs.q[:, 1:2] - half < road.right[None, :]) | (
-            obs.q[:, 1:2] + half > road.left[None, :])
-        wall = (ds > 0) & (ds < WALL_REACH_M) & out
-        gap = np.min(np.where(wall, ds, np.inf), axis=1) - 0.5 * obs.length
-        return gap
+        return first_wall_ahead(
+            np.ascontiguousarray(obs.q[:, 0]), np.ascontiguousarray(obs.q[:, 1]),
+            np.ascontiguousarray(obs.width, dtype=float),
+            np.ascontiguousarray(obs.length, dtype=float), road.s0, road.right, road.left,
+            bool(road.periodic), float(road.length_m), WALL_REACH_M)
 
     def _integrate(self, st: StepData) -> None:
         obs = st.obs

@@ -78,7 +78,9 @@ class RoadWorld:
         self.is_static = np.zeros(cap, dtype=bool)
         self.desired = np.zeros(cap)
         self.tau = np.zeros(cap)
-        self._cmd: dict = {}  # id -> (v_next, d_next, v_lat_next)
+        #: the last commands: rows (into ``ids`` at the time of the call) and (v_next,
+        #: d_next, v_lat_next) (K,) each, m/s, m, m/s
+        self._cmd: tuple | None = None
         self._waiting = 0
 
     # --------------------------------------------------------------------------- World
@@ -133,8 +135,19 @@ class RoadWorld:
 
     def apply(self, ids: list, v_next: np.ndarray, d_next: np.ndarray,
               v_lat_next: np.ndarray, rows: np.ndarray | None = None) -> None:
-        for vid, v, d, vl in zip(ids, v_next, d_next, v_lat_next, strict=True):
-            self._cmd[vid] = (float(v), float(d), float(vl))
+        """Commands for the next step; a vehicle not taken over ignores its command."""
+        if rows is None:
+            row_of = dict(zip(self.ids, range(self.n), strict=True))
+            rows = np.fromiter(map(row_of.__getitem__, ids), dtype=np.intp, count=len(ids))
+        rows = np.asarray(rows, dtype=np.intp)
+        if not self.controlled.issuperset(ids):
+            keep = np.fromiter(map(self.controlled.__contains__, ids), dtype=bool,
+                               count=len(ids))
+            rows = rows[keep]
+            v_next, d_next, v_lat_next = (np.asarray(x)[keep]
+                                          for x in (v_next, d_next, v_lat_next))
+        self._cmd = (rows, np.array(v_next, dtype=float), np.array(d_next, dtype=float),
+                     np.array(v_lat_next, dtype=float))
 
     def collisions(self) -> list[tuple[str, str]]:
         return []
@@ -154,7 +167,9 @@ class RoadWorld:
 
     # --------------------------------------------------------------------------- inside
     def _move(self, n: int, dt: float) -> None:
-        ctrl = np.array([vid in self.controlled and vid in self._cmd for vid in self.ids])
+        ctrl = np.zeros(n, dtype=bool)
+        if self._cmd is not None:
+            ctrl[self._cmd[0]] = True
         free = ~ctrl & ~self.is_static[:n]
         if free.any():
             acc = self._idm(np.flatnonzero(free))
@@ -162,13 +177,13 @@ class RoadWorld:
             self.v[:n][free] = v_new
             self.s[:n][free] += v_new * dt
             self.v_lat[:n][free] = 0.0
-        for i in np.flatnonzero(ctrl):
-            v_next, d_next, vl = self._cmd.pop(self.ids[i])
-            self.v[i] = v_next
-            self.s[i] += v_next * dt
-            self.d[i] = d_next
-            self.v_lat[i] = vl
-        self._cmd.clear()
+        if self._cmd is not None:  # the controlled CAVs move as commanded
+            rows, v_next, d_next, vl = self._cmd
+            self.v[rows] = v_next
+            self.s[rows] += v_next * dt
+            self.d[rows] = d_next
+            self.v_lat[rows] = vl
+            self._cmd = None
 
     def _idm(self, rows: np.ndarray) -> np.ndarray:
         n = self.n

@@ -658,3 +658,39 @@ def law_step(P, s, d, v, v_lat, length, width, accel, is_cav, n, order, k_side, 
         u[i, 0] = min(max(u_long[i], P[LMIN]), P[LMAX])
         u[i, 1] = min(max(u_lat[i], -lat_max), lat_max)
     return u, u_long, hi_n, lo_n, j, ask, u_yield, n_asked, target, urgent, n_changes, edges
+
+
+# ------------------------------------------------------------------ narrowing
+@njit(cache=True)
+def narrowing_bound(P, s, d, v, width, length, n, s0, right, left, periodic, period, hi_n,
+                    lo_n, look_min, look_s, half_lat_speed, quarter_a_lat):
+    """The law's ``_narrowing``: approach bound (N,) m/s^2 to the start of the first road
+    piece ahead (``s0``, ``right``, ``left`` (K,) m; within ``max(look_min, v look_s)``)
+    whose edges exclude the CAV's body at its lateral position by more than it can still
+    move sideways before it gets there (``half_lat_speed t`` and ``quarter_a_lat t^2``, and
+    the room to its side bounds ``hi_n``, ``lo_n`` (N,) m); inf if none. Also whether any
+    CAV has such a piece."""
+    k_n = s0.shape[0]
+    out = np.full(n, np.inf)
+    any_wall = False
+    for i in range(n):
+        hw = 0.5 * width[i] + 0.1
+        look = max(look_min, v[i] * look_s)
+        v1 = max(v[i], 1.0)
+        best = np.inf
+        for k in range(k_n):
+            ds = s0[k] - s[i]
+            if periodic:
+                ds = ds % period
+            need = max(right[k] - (d[i] - hw), (d[i] + hw) - left[k])
+            t = max(ds, 0.0) / v1
+            can = min(half_lat_speed * t, quarter_a_lat * (t * t))
+            room = hi_n[i] - d[i] if right[k] > d[i] - hw else d[i] - lo_n[i]
+            can = min(can, max(room, 0.0) + 0.1)
+            if ds > 0 and ds < look and need > can:
+                any_wall = True
+                best = min(best, ds)
+        g = best - 0.5 * length[i]
+        if np.isfinite(g):
+            out[i] = _approach(P, g, 0.0, v[i])
+    return out, any_wall

@@ -313,33 +313,18 @@ class LaneFreeFlocking:
     def _narrowing(self, obs, sc, side) -> np.ndarray:
         """Approach bound (N,) m/s^2 to the start of the first road piece ahead (within the
         look-ahead) whose edges exclude the CAV's body at its lateral position by more than
-        it can still move sideways before it gets there; inf if none."""
+        it can still move sideways before it gets there; inf if none
+        (:func:`kernels.narrowing_bound`: one pass over the CAVs and the road's pieces; a
+        vehicle alongside on the side the CAV must move to blocks it now)."""
         p = self.params
-        n = sc.n
         road = obs.road
-        s, d = sc.s[:n], sc.d[:n]
-        half_w = 0.5 * sc.width[:n] + 0.1
-        ds = road.s0[None, :] - s[:, None]  # (N, K)
-        if road.periodic:
-            ds = np.mod(ds, road.length_m)
-        look = np.maximum(p.edge_lookahead_min_m, sc.v[:n] * p.lookahead_s)
-        # lateral shift the body needs to fit the piece, and what it can still do before
-        # reaching it (half the lateral speed limit and half the bound deceleration)
-        need = np.maximum(road.right[None, :] - (d[:, None] - half_w[:, None]),
-                          (d[:, None] + half_w[:, None]) - road.left[None, :])
-        t_avail = np.maximum(ds, 0.0) / np.maximum(sc.v[:n], 1.0)[:, None]
-        can = np.minimum(0.5 * self.lat_speed_max * t_avail,
-                         0.25 * p.a_lat_bound_mps2 * t_avail**2)
-        # a vehicle alongside on the side the CAV must move to blocks it now
-        to_left = road.right[None, :] > d[:, None] - half_w[:, None]
-        room = np.where(to_left, side["hi"][:, None] - d[:, None],
-                        d[:, None] - side["lo"][:, None])
-        can = np.minimum(can, np.maximum(room, 0.0) + 0.1)
-        wall = (ds > 0) & (ds < look[:, None]) & (need > can)
-        if not wall.any():
-            return np.full(n, np.inf)
-        g = np.min(np.where(wall, ds, np.inf), axis=1) - 0.5 * sc.length[:n]
-        return np.where(np.isfinite(g), self._approach(g, np.zeros(n), sc.v[:n]), np.inf)
+        out, _ = K.narrowing_bound(
+            self._pack(obs.dt), sc.s, sc.d, sc.v, sc.width, sc.length, sc.n, road.s0,
+            road.right, road.left, bool(road.periodic), float(road.length_m),
+            np.ascontiguousarray(side["hi"], dtype=float),
+            np.ascontiguousarray(side["lo"], dtype=float), float(p.edge_lookahead_min_m),
+            float(p.lookahead_s), 0.5 * self.lat_speed_max, 0.25 * p.a_lat_bound_mps2)
+        return out
 
     def _approach(self, g, v_j, v) -> np.ndarray:
         """Approach bound ``k_a (v_safe - v)``: come down to the leader's speed at the
@@ -366,21 +351,21 @@ class LaneFreeFlocking:
         """``ask`` (N, K) without the pairs a CAV has yielded to too long (memory by ids)."""
         p = self.params
         t = float(obs.t)
-        ids_all = list(obs.ids.tolist()) + (list(obs.others_ids.tolist())
-                                            if obs.others_ids is not None else
-                                            [None] * (len(sc.s) - sc.n))
+        ids_all = obs.ids.tolist() + (obs.others_ids.tolist() if obs.others_ids is not None
+                                      else [None] * (len(sc.s) - sc.n))
         keep = ask.copy()
-        seen = set()
         rows, cols = np.nonzero(ask)
-        for r, c in zip(rows.tolist(), cols.tolist(), strict=True):
-            key = (obs.ids[r], ids_all[j[r, c]])
-            seen.add(key)
-            start = self._yield_since.setdefault(key, t)
-            waited = t - start
-            if waited > p.yield_timeout_s:
-                keep[r, c] = False
-                if waited > p.yield_timeout_s + p.yield_cooldown_s:
-                    self._yield_since[key] = t  # patience again
+        keys = list(zip(map(ids_all.__getitem__, rows.tolist()),
+                        map(ids_all.__getitem__, j[rows, cols].tolist()), strict=True))
+        seen = set(keys)
+        since = self._yield_since
+        timeout, renew = p.yield_timeout_s, p.yield_timeout_s + p.yield_cooldown_s
+        for k, key in enumerate(keys):
+            waited = t - since.setdefault(key, t)
+            if waited > timeout:
+                keep[rows[k], cols[k]] = False
+                if waited > renew:
+                    since[key] = t  # patience again
         for key in [k for k, t0 in self._yield_since.items()
                     if k not in seen and t - t0 <= p.yield_timeout_s]:
             del self._yield_since[key]  # the pair ended before the timeout
