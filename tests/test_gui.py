@@ -220,9 +220,11 @@ def _screenshot_case(out: Path) -> dict:
     ])
     try:
         ts.gui.setBoundary(DEFAULT_VIEW, VIEW_X_M[0], -30.0, VIEW_X_M[1], 30.0)
-        res = {"boundary": ts.gui.getBoundary(DEFAULT_VIEW),
-               "road_width_m": sc.network.width_m}
+        res = {"road_width_m": sc.network.width_m}
         screenshot(ts, out / "empty.png")
+        # the view as drawn: read after the picture (a loaded machine may lay out the
+        # window after the boundary was asked for, and sumo-gui then fits it again)
+        res["boundary"] = ts.gui.getBoundary(DEFAULT_VIEW)
         res["vehicles_at_empty"] = ts.vehicle.getIDCount()
         res["t_empty_s"] = ts.simulation.getTime()
         (x0, _), (x1, _) = res["boundary"]

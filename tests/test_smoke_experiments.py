@@ -63,7 +63,7 @@ SEED_RESULTS = {"seed001_delays.py": _seed001_results, "seed002_formation.py": _
 
 
 @pytest.mark.parametrize("script", sorted(SEED_RESULTS))
-@pytest.mark.slow(seconds=6)
+@pytest.mark.slow(seconds=10)
 def test_seed_experiment_smoke_writes_its_results(tmp_path, script):
     _run([sys.executable, str(REPO / "experiments" / script), "--smoke", "--out", str(tmp_path)])
     assert list(tmp_path.rglob("*.png")), "no figure written"

@@ -11,8 +11,10 @@ kept in dicts pruned every step.
 
 from __future__ import annotations
 
+import functools
 import zlib
 from dataclasses import dataclass
+from itertools import compress, repeat
 
 import numpy as np
 
@@ -22,6 +24,7 @@ from . import kernels as K
 from .params import LaneFreeParams
 
 
+@functools.lru_cache(maxsize=1 << 16)
 def _stable_hash(vid) -> int:
     """A hash of a vehicle id that is the same in every process (Python's is salted)."""
     return zlib.crc32(str(vid).encode())
@@ -224,20 +227,28 @@ class LaneFreeFlocking:
                 is_cav=np.ones(n, bool), static=static, n=n)
         oq, op = obs.others_q, obs.others_p
         ol, ow = obs.others_length, obs.others_width
-        oids = obs.others_ids.tolist() if obs.others_ids is not None else [None] * len(oq)
-        self._moved.update(i for i, v in zip(oids, op[:, 0], strict=True)
-                           if i is not None and v > 0.5)
-        v_prev = np.array([self._v_prev.get(i, np.nan) if i is not None else np.nan
-                           for i in oids])
+        m_o = len(oq)
+        if obs.others_ids is None:  # anonymous: no memory of them
+            v_prev = d_prev = np.full(m_o, np.nan)
+            self._d_prev = {}
+        else:  # by id, C-level passes
+            oids = obs.others_ids.tolist()
+            self._moved.update(compress(oids, (op[:, 0] > 0.5).tolist()))
+            v_prev = np.fromiter(map(self._v_prev.get, oids, repeat(np.nan)), dtype=float,
+                                 count=m_o)
+            d_prev = np.fromiter(map(self._d_prev.get, oids, repeat(np.nan)), dtype=float,
+                                 count=m_o)
+            self._d_prev = dict(zip(oids, oq[:, 1].tolist(), strict=True))
         a_other = np.where(np.isfinite(v_prev), (op[:, 0] - v_prev) / obs.dt, 0.0)
         # lateral speed towards the road's frame from the positions (a vehicle on an
         # on-ramp reports 0 across its own lane while it converges on the road)
-        d_prev = np.array([self._d_prev.get(i, np.nan) if i is not None else np.nan
-                           for i in oids])
         v_lat = np.where(np.isfinite(d_prev), (oq[:, 1] - d_prev) / obs.dt, op[:, 1])
-        self._d_prev = {i: float(d) for i, d in zip(oids, oq[:, 1], strict=True)
-                        if i is not None}
         od = self._entering(obs, oq, op, ow, v_lat)
+        if obs.others_ids is None:
+            static_o = np.zeros(m_o, bool)
+        else:  # never seen moving and standing still: a stopped obstacle
+            seen = np.fromiter(map(self._moved.__contains__, oids), dtype=bool, count=m_o)
+            static_o = ~seen & (np.abs(op[:, 0]) < 0.5)
         return _Scene(
             s=np.concatenate([obs.q[:, 0], oq[:, 0]]),
             d=np.concatenate([obs.q[:, 1], od]),
@@ -247,10 +258,7 @@ class LaneFreeFlocking:
             width=np.concatenate([width, ow]).astype(float, copy=False),
             accel=np.concatenate([u_prev, a_other]),
             is_cav=np.concatenate([np.ones(n, bool), np.zeros(len(oq), bool)]),
-            static=np.concatenate([np.zeros(n, bool),
-                                   np.array([i is not None and i not in self._moved
-                                             and abs(v) < 0.5 for i, v in
-                                             zip(oids, op[:, 0], strict=True)], dtype=bool)]),
+            static=np.concatenate([np.zeros(n, bool), static_o]),
             n=n,
         )
 
@@ -306,8 +314,10 @@ class LaneFreeFlocking:
             edges = np.column_stack([np.full(n, -np.inf), np.full(n, np.inf)])
         loop_edges = None
         if obs.road_edges is not None:  # never wider than what the loop enforces
-            loop_edges = np.ascontiguousarray(obs.road_edges, dtype=float)
-        return np.ascontiguousarray(edges, dtype=float), loop_edges
+            # writable and contiguous: a read-only copy (delayed messages) would make numba
+            # compile law_step once more
+            loop_edges = np.require(obs.road_edges, dtype=float, requirements=("C", "W"))
+        return np.require(edges, dtype=float, requirements=("C", "W")), loop_edges
 
     # ------------------------------------------------------------------ longitudinal
     def _narrowing(self, obs, sc, side) -> np.ndarray:
@@ -385,7 +395,7 @@ class LaneFreeFlocking:
             return out
         oids = obs.others_ids.tolist()
         rows = np.arange(n, m)
-        moved = np.array([i in self._moved for i in oids], dtype=bool)
+        moved = np.fromiter(map(self._moved.__contains__, oids), dtype=bool, count=len(oids))
         slow = rows[(sc.v[rows] < 3.0) & moved]
         if not len(slow):
             return out
@@ -424,7 +434,7 @@ class LaneFreeFlocking:
         self._calls += 1
         if obs.others_ids is not None and sc.n < len(sc.s):
             oids = obs.others_ids.tolist()
-            self._v_prev = {i: float(v) for i, v in zip(oids, sc.v[sc.n:], strict=True)}
+            self._v_prev = dict(zip(oids, sc.v[sc.n:].tolist(), strict=True))
             self._moved.intersection_update(oids)
         else:
             self._v_prev = {}
