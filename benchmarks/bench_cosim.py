@@ -33,8 +33,10 @@ hooks (:class:`cosim.sim.loop.PhaseTimer`; no monkeypatching): ``advance`` is SU
 and the first ``control`` step alone (numba loads its compiled kernels from the cache).
 
 Then the cost per vehicle-step with N = 100, 500, 1 000, 2 000 vehicles on a 10 km x 10.2 m
-ring (100 % CAVs placed at t = 0: N stays fixed), after ``SCALE_SKIP`` steps: SUMO's step,
-the Python side (every other phase) and each phase, us per vehicle-step.
+ring (100 % CAVs placed at t = 0: N stays fixed), after ``SCALE_SKIP`` steps, in as many
+interleaved rounds as the main case (medians): SUMO's step, the Python side (every other
+phase) and each phase, us per vehicle-step, and how flat each is over N (largest /
+smallest).
 
 Usage::
 
@@ -246,18 +248,29 @@ def print_phases(res: dict) -> None:
 
 
 def print_scaling(scale: dict, duration_s: float) -> None:
+    """Per vehicle-step costs of the rings, medians over rounds (us), and how flat they are
+    from the smallest to the largest N (largest / smallest of the N)."""
+    rounds = len(next(iter(scale.values())))
     print(f"\nCost per vehicle-step, N CAVs on a {SCALE_LENGTH_M / 1000:g} km x {bf.WIDTH_M:g} m "
-          f"ring, {duration_s:g} s, steps {SCALE_SKIP}+ (us per vehicle-step; Python = all "
-          "phases but SUMO's step)")
+          f"ring, {duration_s:g} s, steps {SCALE_SKIP}+, medians of {rounds} round(s) (us per "
+          "vehicle-step; Python = all phases but SUMO's step)")
     cols = ["N", "veh-steps", "SUMO", "Python", "total"] + [p for p in PHASES if p != "advance"]
     print("".join(f"{c:>10}" for c in cols))
-    for n, r in scale.items():
-        vs = r["veh_steps_after"]
-        ph = r["phases_after"]
-        sumo = ph["advance"]
-        py = sum(v for k, v in ph.items() if k != "advance")
-        vals = [sumo, py, sumo + py] + [ph[p] for p in PHASES if p != "advance"]
-        print(f"{n:>10}{vs:>10}" + "".join(f"{1e6 * x / vs:10.2f}" for x in vals))
+    per_n = {}
+    for n, runs in scale.items():
+        def us(fn, runs=runs):
+            return bf._med([1e6 * fn(r) / r["veh_steps_after"] for r in runs])
+        sumo = us(lambda r: r["phases_after"]["advance"])
+        py = us(lambda r: sum(v for k, v in r["phases_after"].items() if k != "advance"))
+        tot = us(lambda r: sum(r["phases_after"].values()))
+        vals = [sumo, py, tot] + [us(lambda r, p=p: r["phases_after"][p])
+                                  for p in PHASES if p != "advance"]
+        per_n[n] = (sumo, py, tot)
+        print(f"{n:>10}{runs[0]['veh_steps_after']:>10}" + "".join(f"{x:10.2f}" for x in vals))
+    for k, name in ((1, "Python side"), (2, "total"), (0, "SUMO's step")):
+        xs = [v[k] for v in per_n.values()]
+        print(f"{name} per vehicle-step: {min(xs):.2f}-{max(xs):.2f} us over N = "
+              f"{min(per_n)}..{max(per_n)} (largest / smallest {max(xs) / min(xs):.2f})")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -319,9 +332,11 @@ def bench(ns) -> int:
     print(f"cosim: vehicles inserted {[r['inserted'] for r in res['cosim']]}, SUMO collisions "
           f"with CAVs {col}")
     if not ns.no_scaling:
-        scale = {}
-        for n in SCALE_N:
-            scale[n] = run_cosim("ring", ring_overrides(n, scale_s), skip=SCALE_SKIP)
+        scale: dict[int, list[dict]] = {n: [] for n in SCALE_N}
+        for r in range(rounds):  # interleaved too, in rotating order
+            order = SCALE_N[r % len(SCALE_N):] + SCALE_N[:r % len(SCALE_N)]
+            for n in order:
+                scale[n].append(run_cosim("ring", ring_overrides(n, scale_s), skip=SCALE_SKIP))
         print_scaling(scale, scale_s)
     print(f"\n(total benchmark wall time {time.perf_counter() - t_start:.0f} s, "
           f"load {os.getloadavg()[0]:.1f})")

@@ -8,7 +8,7 @@ positive to the left). A world (the plane world or the SUMO adapter) builds one
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass, field, fields
 
 import numpy as np
 
@@ -257,6 +257,30 @@ class Observation:
         if self.period_s is not None and not self.period_s > 0:
             raise ValueError("period_s must be > 0")
 
+    @classmethod
+    def trusted(cls, **values) -> Observation:
+        """An observation of fields already in their final form, unchecked and uncopied:
+        ``q``, ``p`` (N, m) float64, per-agent fields (N,) float64, ``others_*`` (M, m) and
+        (M,) float64, ``road_edges`` (N, 2) float64, ``ids`` and ``others_ids`` object
+        arrays; absent fields take their defaults. For a world's loop that builds every
+        array itself each step (:mod:`cosim.sim.loop`; tests/test_loop.py checks that it
+        equals the validating constructor's result); everything else uses the
+        constructor."""
+        obj = object.__new__(cls)
+        for f in _FIELDS:
+            if f.name in values:
+                v = values.pop(f.name)
+            elif f.default_factory is not MISSING:
+                v = f.default_factory()
+            else:
+                v = f.default
+            object.__setattr__(obj, f.name, v)
+        if values:
+            raise TypeError(f"Observation has no field(s) {', '.join(sorted(values))}")
+        if obj.ids is None:
+            object.__setattr__(obj, "ids", np.arange(obj.q.shape[0]))
+        return obj
+
     @property
     def n(self) -> int:
         """Number of controlled agents N."""
@@ -286,3 +310,6 @@ class Observation:
         L = self.period_s
         out[..., 0] = (out[..., 0] + 0.5 * L) % L - 0.5 * L
         return out
+
+
+_FIELDS = fields(Observation)

@@ -351,3 +351,32 @@ def test_jam_figures_see_a_queue_behind_a_blocked_road():
     assert s["max_standstill_s"] > 45.0
     assert s["vehicles_stopped_long"] >= 5
     assert s["blocked_windows"] >= 2 and s["gridlock"]
+
+
+@pytest.mark.parametrize("name", ["default", "obstacle", "ring", "varying_width"])
+def test_the_loops_observation_equals_the_validating_constructors(name):
+    """The loop builds its observation with ``Observation.trusted`` (no checks, no
+    copies); the validating constructor, given the same fields, builds the same one: the
+    same values, dtypes and shapes in every field (CAVs only, and with sensed vehicles)."""
+    from dataclasses import fields
+
+    from controllers.observation import Observation
+
+    seen: list = []
+    over = {"scenario.world": "road", "scenario.duration_s": 20.0, "scenario.warmup_s": 1.0,
+            "demand.cav_share": 0.7}
+
+    def hooks(loop):
+        loop.hooks.add("reference", lambda st: seen.append(st.obs))
+
+    run_scenario(load_scenario(name, over), hooks=hooks)
+    assert len(seen) > 50 and any(len(o.others_q) for o in seen)
+    for obs in seen[::7]:
+        again = Observation(**{f.name: getattr(obs, f.name) for f in fields(Observation)})
+        for f in fields(Observation):
+            a, b = getattr(obs, f.name), getattr(again, f.name)
+            if isinstance(a, np.ndarray):
+                assert a.dtype == b.dtype and a.shape == b.shape, f.name
+                assert np.array_equal(a, b), f.name
+            else:
+                assert a == b or a is b, f.name

@@ -37,6 +37,7 @@ from controllers.observation import Observation
 from controllers.profile_kernels import first_wall_ahead
 from controllers.safety import RoadState, SafetyLayer
 from cosim.errors import CosimError
+from cosim.sim.kernels import cav_columns
 from cosim.sim.world import RoadSnapshot, World
 
 PHASES = ("advance", "observe", "reference", "control", "constrain", "safety", "integrate",
@@ -207,20 +208,21 @@ class Loop:
         state, rows = st.state, st.cav_rows
         others = (_NO_ROWS if len(rows) == state.n  # every vehicle is a controlled CAV
                   else np.flatnonzero(~st.controlled & np.isfinite(state.s)))
-        q = _pair(state.s, state.d, rows)
-        p = _pair(state.v, state.v_lat, rows)
-        desired = state.desired[rows]
-        desired = np.where(np.isfinite(desired), desired, self.world.speed_limit_mps)
         b = self.limits.emergency_decel_mps2
-        stop = p[:, 0] * self.dt + p[:, 0] ** 2 / (2 * b) + EDGE_MARGIN_AHEAD_M
+        q, p, desired, stop, length, width = cav_columns(
+            np.asarray(rows, dtype=np.int64), *_f64(state.s, state.d, state.v, state.v_lat,
+                                                      state.length, state.width, state.desired),
+            float(self.world.speed_limit_mps), self.dt, 2 * b, EDGE_MARGIN_AHEAD_M)
         edges = self.world.road.narrowest(q[:, 0], stop)
         all_ids = state.ids
-        st.obs = Observation(
-            q=q, p=p, t=st.t, dt=self.dt, ids=_objects(st.cav_ids),
-            length=state.length[rows], width=state.width[rows],
-            others_q=_pair(state.s, state.d, others),
+        # the observation's arrays are built here in their final form (float64, the
+        # documented shapes): the constructor's checks and conversions are skipped
+        st.obs = Observation.trusted(
+            q=q, p=p, t=st.t, dt=self.dt, ids=_objects(st.cav_ids), length=length,
+            width=width, others_q=_pair(state.s, state.d, others),
             others_p=_pair(state.v, state.v_lat, others),
-            others_length=state.length[others], others_width=state.width[others],
+            others_length=np.asarray(state.length[others], dtype=float),
+            others_width=np.asarray(state.width[others], dtype=float),
             others_ids=_objects(list(map(all_ids.__getitem__, others.tolist()))
                                 if len(others) else []),
             road_edges=edges, period_s=self.world.period, desired_speed=desired,
@@ -293,6 +295,11 @@ def _pair(a: np.ndarray, b: np.ndarray, rows: np.ndarray) -> np.ndarray:
     out[:, 0] = a[rows]
     out[:, 1] = b[rows]
     return out
+
+
+def _f64(*arrays: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The arrays as float64 (no copy when they are already)."""
+    return tuple(np.asarray(a, dtype=float) for a in arrays)
 
 
 def _objects(items: list) -> np.ndarray:
