@@ -3,7 +3,8 @@
 ``neighbour_pairs`` returns the undirected pairs (i < j) whose (scaled)
 distance is below a radius. The KD-tree path (scipy's cKDTree) costs
 O(N log N) time and O(N + pairs) memory; the dense path builds the N x N
-distance matrix and exists only as a reference for tests and small N.
+distance matrix and exists only as a reference for tests and small N. scipy is imported
+where the tree is built (not when the package is: ``cosim list`` needs none of it).
 A periodic axis 0 (ring road of length ``period``) is handled by the tree's
 ``boxsize``; the other axes are shifted so that they never wrap.
 """
@@ -11,7 +12,6 @@ A periodic axis 0 (ring road of length ``period``) is handled by the tree's
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 DENSE_MAX_N = 64  # "auto" uses the dense reference only up to this many agents
 
@@ -46,6 +46,8 @@ def neighbour_pairs_tree(x: np.ndarray, radius: float, period: float | None = No
     pts, boxsize = tree_points(x, radius, period)
     # balanced_tree=False: sliding-midpoint splits instead of medians, a faster build
     # (the query is exact either way, so the pairs are the same).
+    from scipy.spatial import cKDTree
+
     tree = cKDTree(pts, boxsize=boxsize, balanced_tree=False)
     # query_pairs uses <= r; shrink by one ulp-ish factor to match the strict "<".
     pairs = tree.query_pairs(np.nextafter(radius, 0.0), output_type="ndarray")
@@ -112,6 +114,8 @@ def cross_pairs(
         return np.empty((0, 2), dtype=np.int64)
     if _is_strip(x, y, radius, period):
         return strip_cross_pairs(x, y, radius, period)
+    from scipy.spatial import cKDTree
+
     if period is None:
         tree_x, tree_y = cKDTree(x), cKDTree(y)
     else:

@@ -12,8 +12,6 @@ from dataclasses import MISSING, dataclass, field, fields
 
 import numpy as np
 
-from controllers import profile_kernels as PK
-
 
 class InvalidStateError(ValueError):
     """A NaN or infinite state entered a controller; the message names the agent."""
@@ -104,6 +102,8 @@ class RoadProfile:
             out[:, 1] = self.left[0]
             return out
         if s.ndim == 1 and s.dtype == np.float64:  # compiled (controllers.profile_kernels)
+            from controllers import profile_kernels as PK  # numba: imported when first used
+
             return PK.edges_at(s, self.s0, self.right, self.left, self.periodic,
                                float(self.length_m))
         if self.periodic:
@@ -125,6 +125,8 @@ class RoadProfile:
             return self.edges(s)
         ahead = np.broadcast_to(np.asarray(ahead_m, dtype=float), s.shape)
         if s.ndim == 1:  # compiled (controllers.profile_kernels)
+            from controllers import profile_kernels as PK
+
             return PK.narrowest_over(s, np.ascontiguousarray(ahead), self.s0, self.right,
                                      self.left, self.periodic, float(self.length_m))
         out = self.edges(s)

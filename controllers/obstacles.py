@@ -28,11 +28,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .observation import Circles, Walls
+
+if TYPE_CHECKING:  # imported where used: not at start-up (cosim list, config)
+    from scipy.spatial import cKDTree
 
 
 def _check_spacing(spacing: float) -> float:
@@ -304,6 +307,8 @@ def sense(
     q = np.atleast_2d(np.asarray(q, dtype=float))
     if len(q) == 0 or len(points) == 0:
         return np.empty((0, 2), dtype=np.int64)
+    from scipy.spatial import cKDTree
+
     tree = cKDTree(points) if tree is None else tree
     lists = tree.query_ball_point(q, np.nextafter(radius, 0.0))
     counts = np.fromiter((len(v) for v in lists), dtype=np.int64, count=len(lists))
@@ -357,6 +362,8 @@ class ObstacleSet:
         """KD-tree of the boundary points (cached)."""
         key = ("tree", _check_spacing(spacing))
         if key not in self._cache:
+            from scipy.spatial import cKDTree
+
             self._cache[key] = cKDTree(self.boundary_points(spacing))
         return self._cache[key]
 

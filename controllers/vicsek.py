@@ -39,10 +39,9 @@ domains); no N x N array is ever built.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
-from scipy.spatial import cKDTree
 
 from controllers.observation import Observation
 
@@ -57,6 +56,12 @@ __all__ = [
     "order_parameter",
     "velocity_alignment",
 ]
+
+
+if TYPE_CHECKING:  # imported where used: not at start-up (cosim list, config)
+    import pandas as pd
+    from scipy.spatial import cKDTree
+
 
 RULES = ("vicsek", "seed004")
 
@@ -87,6 +92,8 @@ def _wrap(q: np.ndarray, box: np.ndarray | None) -> np.ndarray:
 
 
 def _tree(q: np.ndarray, box: np.ndarray | None) -> cKDTree:
+    from scipy.spatial import cKDTree
+
     return cKDTree(_wrap(q, box), boxsize=box)
 
 
@@ -391,6 +398,8 @@ class VicsekModel:
             self.advance(chunk)
             done += chunk
             rows.append(self.metrics())
+        import pandas as pd
+
         return pd.DataFrame(rows)
 
 

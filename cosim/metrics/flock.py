@@ -15,13 +15,9 @@ Sources:
 from __future__ import annotations
 
 import numpy as np
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 from controllers.neighbours import DENSE_MAX_N, neighbour_pairs, tree_points
 from controllers.observation import Circles, Walls
-from cosim.metrics import kernels as K
 
 
 def nearest_neighbour_distances(q: np.ndarray, period: float | None = None) -> np.ndarray:
@@ -31,6 +27,8 @@ def nearest_neighbour_distances(q: np.ndarray, period: float | None = None) -> n
     q = np.asarray(q, dtype=float)
     # The lateral box must exceed the lateral span so that only axis 0 wraps.
     span = float(np.ptp(q[:, 1:])) if q.shape[1] > 1 else 0.0
+    from scipy.spatial import cKDTree  # here, not at import: `cosim list` needs none of it
+
     pts, box = tree_points(q, max(1.0, span), period)
     dist, _ = cKDTree(pts, boxsize=box).query(pts, k=2)
     return dist[:, 1]
@@ -115,6 +113,9 @@ def connectivity(q: np.ndarray, r: float, period: float | None = None,
     Graph edges join agents closer than ``r`` (m), OS06's proximity net; ``pairs``: its
     ``neighbour_pairs(q, r, period)`` (P, 2) if already known.
     """
+    from scipy.sparse import csr_matrix
+    from scipy.sparse.csgraph import connected_components
+
     n = len(q)
     if n == 0:
         return 0, np.nan
@@ -181,6 +182,8 @@ def _net_2d(q: np.ndarray, r: float, period: float | None):
     ``DENSE_MAX_N`` agents, the tree's above it), :func:`connectivity` and
     :func:`nearest_neighbour_distances`, each computed as those compute it, by the compiled
     kernels of :mod:`cosim.metrics.kernels` (tests/test_recorder_exactness.py)."""
+    from cosim.metrics import kernels as K  # numba: imported when first used
+
     n = len(q)
     periodic = period is not None
     per = float(period) if periodic else 0.0

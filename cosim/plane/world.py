@@ -13,12 +13,15 @@ import json
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
 
 from controllers.observation import Circles, Observation, Walls
 from cosim.metrics.flock import flock_metrics
+
+if TYPE_CHECKING:  # imported where the tables are built, not at start-up (cosim list)
+    import pandas as pd
 
 INTEGRATORS = ("euler", "semi_implicit")
 
@@ -231,6 +234,8 @@ class PlaneWorld:
         self._traj.append(block)
 
     def result(self, meta: dict | None = None) -> PlaneResult:
+        import pandas as pd
+
         m = self.q.shape[1]
         cols = ["t_s", "agent"]
         cols += [f"{a}_m" for a in _AX[:m]]

@@ -64,7 +64,6 @@ import numpy as np
 
 from controllers.observation import RoadProfile
 from cosim.errors import ConfigError, NetworkError
-from cosim.road import frame_kernels as FK
 
 #: Spacing (m) of the per-lane tables of ``s`` and of the road-edge samples.
 SAMPLE_M = 1.0
@@ -472,6 +471,8 @@ class RoadNetwork:
         k = self.lane_keys(lanes) if keys is None else keys
         tb = self.tables
         if tb.par is not None and tb.measure is not None and len(k):  # parallel lanes
+            from cosim.road import frame_kernels as FK  # numba: imported when first used
+
             s, d, ok = FK.parallel_frame(k, pos, lat, tb.par, tb.par_s0, tb.par_d0,
                                          tb.measure.periodic, float(tb.measure.s_period))
             if ok:
@@ -499,6 +500,8 @@ class RoadNetwork:
         k = self.lane_keys(lanes) if keys is None else keys
         tb = self.tables
         if tb.par is not None and len(k):  # every lane reached parallel to the line
+            from cosim.road import frame_kernels as FK
+
             lat, ok = FK.parallel_lateral(k, pos, d, tb.lane_len, tb.next_lane, tb.par,
                                           tb.par_d0)
             if ok:

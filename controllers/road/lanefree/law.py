@@ -20,8 +20,15 @@ import numpy as np
 
 from controllers.observation import Observation
 
-from . import kernels as K
 from .params import LaneFreeParams
+
+
+def _kernels():
+    """The compiled kernels (:mod:`.kernels`), imported when a law first computes (not when
+    a scenario's configuration imports the law for its parameters: that needs no numba)."""
+    from . import kernels
+
+    return kernels
 
 
 @functools.lru_cache(maxsize=1 << 16)
@@ -156,7 +163,7 @@ class LaneFreeFlocking:
         # primary leader in the current band, searched as far as braking needs
         reach = float(np.max(sc.v[:n])) ** 2 / (2 * p.comfort_decel_mps2) + 30.0
         (u, u_long, hi_n, lo_n, j, ask, u_yield, n_asked, target, urgent, n_changes,
-         self._edges_plan) = K.law_step(
+         self._edges_plan) = _kernels().law_step(
             self._pack(obs.dt), sc.s, sc.d, sc.v, sc.v_lat, sc.length, sc.width, sc.accel,
             sc.is_cav, n, order, k_side, periodic, period, target, urgent, due,
             p.lateral_mode == "fixed", edges, loop_edges, loop_edges is not None, v_des,
@@ -181,7 +188,7 @@ class LaneFreeFlocking:
     def _pack(self, dt: float) -> np.ndarray:
         P = self._packed.get(dt)
         if P is None:
-            P = K.pack(self.params, self.long_min, self.long_max, self.lat_speed_max,
+            P = _kernels().pack(self.params, self.long_min, self.long_max, self.lat_speed_max,
                        self.emergency_decel, dt)
             self._packed[dt] = P
         return P
@@ -328,7 +335,7 @@ class LaneFreeFlocking:
         vehicle alongside on the side the CAV must move to blocks it now)."""
         p = self.params
         road = obs.road
-        out, _ = K.narrowing_bound(
+        out, _ = _kernels().narrowing_bound(
             self._pack(obs.dt), sc.s, sc.d, sc.v, sc.width, sc.length, sc.n, road.s0,
             road.right, road.left, bool(road.periodic), float(road.length_m),
             np.ascontiguousarray(side["hi"], dtype=float),
