@@ -1,5 +1,5 @@
-"""Why mixed runs keep the CAVs' SUMO action step at one step (README, How CAV commands
-reach SUMO).
+"""Why mixed runs differed with a long SUMO action step for the CAVs, and what remains
+(README, How CAV commands reach SUMO).
 
 The TUM ring (``experiments/scenarios/tum_ring.toml``) with a share of CAVs, run three ways,
 each in its own process, the runs of one seed side by side:
@@ -7,10 +7,13 @@ each in its own process, the runs of one seed side by side:
 * ``every_step``  what ``cosim run`` does with human drivers in the demand: the CAVs' SUMO
                   action step is one step;
 * ``long``        the CAVs' action step is ``scenario.cav_action_step_s`` (1 s) although
-                  SUMO's drivers share the road (what the runner refuses to do);
-* ``speed_only``  one step, but ``setPreviousSpeed(v_next)`` before ``setSpeed`` as with
-                  the long action step: SUMO's drivers read a CAV's speed of the step it is
-                  in, nothing else changes.
+                  SUMO's drivers share the road (what the runner does not do), SUMO's
+                  Euler update kept (``--step-method.ballistic false``, as the runner
+                  passes it);
+* ``ballistic``   the same without that option: SUMO then switches every vehicle to the
+                  ballistic update as soon as one has an action step longer than a step
+                  (``MSVehicleType::check``; its warning is hidden by ``--no-warnings``),
+                  what every long-action-step run did before the option was passed.
 
 The runner picks the action step inside ``cosim.sim.runner.build_world``; this diagnostic
 swaps ``cosim.sumo.world.SumoWorld`` for a subclass that forces the variant (the CAVs' motion
@@ -31,7 +34,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-MODES = ("every_step", "long", "speed_only")
+MODES = ("every_step", "long", "ballistic")
 
 
 def child(mode: str, share: float, seed: int, duration_s: float, warmup_s: float) -> dict:
@@ -42,12 +45,13 @@ def child(mode: str, share: float, seed: int, duration_s: float, warmup_s: float
     SumoWorld = sumo_world.SumoWorld
 
     class Forced(SumoWorld):
-        def __init__(self, *args, cav_action_step_s=None, **kw):
+        def __init__(self, net, sumo_args, *args, cav_action_step_s=None, **kw):
             dt = kw.get("dt", 0.1)
-            asl = 1.0 if mode == "long" else dt
-            super().__init__(*args, cav_action_step_s=asl, **kw)
-            if mode == "speed_only":
-                self._slow_actions = True  # setPreviousSpeed, with a one-step action step
+            asl = dt if mode == "every_step" else 1.0
+            if mode == "ballistic":  # SUMO's default: it picks the update itself
+                i = sumo_args.index("--step-method.ballistic")
+                sumo_args = sumo_args[:i] + sumo_args[i + 2:]
+            super().__init__(net, sumo_args, *args, cav_action_step_s=asl, **kw)
 
     sumo_world.SumoWorld = Forced  # build_world imports it from the module at call time
     sc = load_scenario("tum_ring", {"demand.cav_share": share, "scenario.seed": seed,

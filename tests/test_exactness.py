@@ -119,12 +119,14 @@ def test_sumo_run_matches_reference(tmp_path):
 
 
 @pytest.mark.sumo
-@pytest.mark.parametrize("scen", ["obstacle", "ring", "onramp"])
+@pytest.mark.parametrize("scen", ["obstacle", "ring", "onramp", "width_drop"])
 def test_cav_action_step_leaves_cav_motion_unchanged(scen, tmp_path):
     """With only CAVs on the road, SUMO's action step for CAVs (one step or 1 s) changes
-    nothing of their motion: every state and command is bit-identical (with 1 s SUMO moves
-    a CAV by (v + v_next) dt / 2, made v_next dt by setPreviousSpeed; changeSublane moves
-    are made in steps where the CAV acts)."""
+    nothing of their motion nor of SUMO's insertions: every state and command is
+    bit-identical (SUMO's Euler update kept: without --step-method.ballistic false it
+    switches to the ballistic one when the CAVs get the long action step, and the width
+    drop's entrance inserts otherwise; changeSublane moves are made in steps where the CAV
+    acts)."""
     root = str(Path(__file__).resolve().parents[1])
     every, slow = (rx._run_child("traj", f"{scen}_asl_{a:g}", root, tmp_path) for a in (0.1, 1.0))
     assert every["inserted"] == slow["inserted"] > 10

@@ -73,13 +73,14 @@ class RunSpec:
             own decisions (lane changer, car-following plan) once per action step; our
             law overrules them every step, so a longer one only saves SUMO's work (its
             step costs about a third at 1 s: benchmarks/bench_floor.py); every command
-            lands as before, and runs were bit-identical on the built-in roads tested
-            (tests/test_exactness.py), though SUMO's insertion may differ by a step (a
-            netconvert width change: README). With SUMO's drivers on the
-            road it is not used: they behave differently around CAVs that act once a
-            second (on the TUM ring with 10 % CAVs the flow fell by 11-14 %; cause in
-            SUMO not found). ``meta.json`` records the action step used
-            (``sumo_cav_action_step_s``).
+            lands as before and runs are bit-identical to those with one step
+            (tests/test_exactness.py), insertions included, because the runner keeps
+            SUMO's Euler update explicitly (``--step-method.ballistic false``; unset, SUMO
+            switches every vehicle to the ballistic update when one gets a longer action
+            step). With SUMO's drivers on the road it is not used: their lane changer
+            informs and is informed by the CAVs' only in the CAVs' action steps, and the
+            runs are no longer the same (benchmarks/action_step_humans.py).
+            ``meta.json`` records the action step used (``sumo_cav_action_step_s``).
     """
 
     name: str = "default"

@@ -155,6 +155,11 @@ def build_world(sc: Scenario, work: Path, gui: bool = False):
         "--no-step-log", "true",
         "--no-warnings", "true",
         "--duration-log.disable", "true",
+        # SUMO's default position update (Euler), said explicitly: given no value, SUMO
+        # switches every vehicle to the ballistic update the moment one gets an action
+        # step longer than a step (MSVehicleType::check), as our CAVs do on a road without
+        # human drivers (scenario.cav_action_step_s), and that changes its insertions
+        "--step-method.ballistic", "false",
     ]
     if net.n_lanes <= 1:  # sublane model only on lane-free roads; LC2013 refuses it
         args += ["--lateral-resolution", str(run.lateral_resolution_m)]

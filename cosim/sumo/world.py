@@ -153,9 +153,11 @@ class SumoWorld:
             the runner gives ``scenario.cav_action_step_s`` when no human driver is in the
             demand, else one step). SUMO runs a vehicle's own decisions (its lane changer,
             its car-following plan) once per action step; our law overrules both every
-            step, so a longer one only saves SUMO's work. Above one step SUMO moves such a
-            vehicle by ``(v + v_next) dt / 2`` instead of ``v_next dt``: :meth:`apply`
-            makes the two equal.
+            step, so a longer one only saves SUMO's work. The position update stays SUMO's
+            Euler step ``v_next dt`` only because the runner passes
+            ``--step-method.ballistic false``: given no value, SUMO switches every vehicle
+            to the ballistic update (``(v + v_next) dt / 2``) as soon as one has an action
+            step longer than a step, and its insertions change with it.
     """
 
     def __init__(self, net: RoadNetwork, sumo_args: list[str], dt: float = 0.1,
@@ -164,7 +166,7 @@ class SumoWorld:
         self.net = net
         self.dt = float(dt)
         self.cav_action_step_s = max(float(cav_action_step_s or dt), self.dt)
-        #: the CAVs act less often than every step (setPreviousSpeed needed, see apply)
+        #: the CAVs act less often than every step (see _act_every_step)
         self._slow_actions = self.cav_action_step_s > self.dt + 1e-9
         self.road = net.profile()
         self.speed_limit_mps = float(net.speed_limit_mps)
@@ -192,7 +194,7 @@ class SumoWorld:
         self._pos = np.zeros(0)
         self._lat = np.zeros(0)
         self._sublane = np.zeros(0, dtype=bool)
-        self._set_fns: tuple | None = None  # (setPreviousSpeed, setSpeed, setLatPos)
+        self._set_fns: tuple | None = None  # (setSpeed, setLateralLanePosition)
         self._static_ids: list | None = None  # the vehicles of _static_cols, in order
         self._static_cols: tuple = ()
         self.departed_now: list[str] = []
@@ -387,13 +389,9 @@ class SumoWorld:
         Both land exactly: the CAVs' lane changer may move them up to
         :data:`SUBLANE_MOVE_MAX_MPS` sideways, with no lateral acceleration bound.
 
-        Longitudinal: ``setSpeed(v_next)``, preceded by ``setPreviousSpeed(v_next)`` when
-        the CAVs' action step is longer than a step: SUMO then moves a CAV by
-        ``(v + v_next) dt / 2``; with its speed at the start of the step set to ``v_next``
-        too, that is exactly ``v_next dt``, the semi-implicit Euler step of the loop
+        Longitudinal: ``setSpeed(v_next)``; SUMO's Euler update moves the CAV by exactly
+        ``v_next dt``, the semi-implicit Euler step of the loop, with either action step
         (bench_floor.py's exactness check; tests/test_exactness.py: bit-identical runs).
-        SUMO's drivers planning in that step would read the CAV's speed as ``v_next``; the
-        runner uses a long action step only when there are none.
 
         Every CAV gets every setter every step (``setSpeed`` persists in SUMO, so skipping
         an unchanged one would be exact, but benchmarks/bench_floor.py measured 1 %: not
@@ -417,14 +415,12 @@ class SumoWorld:
                                         d_next, lats, moved)
         if self._set_fns is None:
             self._set_fns = self._setters(veh)
-        set_prev, set_speed, set_lat = self._set_fns
+        set_speed, set_lat = self._set_fns
         if self._slow_actions:
             self._act_every_step(crossed)
         # one C-level pass per setter (each vehicle's commands are independent of the
         # others', so the order of the calls does not matter)
         vs, lats_l = v_next.tolist(), lats.tolist()
-        if self._slow_actions:
-            _consume(map(set_prev, ids, vs))
         _consume(map(set_speed, ids, vs))
         if moved.any():
             placed = (~moved).tolist()
@@ -447,8 +443,8 @@ class SumoWorld:
         speed only in the action step after it. Left standing, SUMO would reserve that
         distance beside a vehicle whose action step is longer than a step, in the sublanes
         its drivers see (``MSLeaderInfo::getSubLanes``): SUMO's drivers would see the CAV
-        wider than it is. (The position update is the same for both action steps: with
-        ``setPreviousSpeed`` both rules give ``v_next dt``.) The CAVs that move this step are
+        wider than it is. (The position update is the same for both action steps.) The CAVs
+        that move this step are
         the controlled ones of the last observation that move sideways with
         ``changeSublane`` but those in ``crossed`` (moved to another lane with ``moveTo``)."""
         at_dt = self._every_step
@@ -502,14 +498,13 @@ class SumoWorld:
         return crossed
 
     def _setters(self, veh):
-        """``(setPreviousSpeed, setSpeed, setLateralLanePosition)``: libsumo's C functions
-        when running libsumo, else the TraCI client's methods (sumo-gui)."""
+        """``(setSpeed, setLateralLanePosition)``: libsumo's C functions when running
+        libsumo, else the TraCI client's methods (sumo-gui)."""
         raw = getattr(self.ts, "_libsumo", None)
-        fast = (getattr(raw, "vehicle_setPreviousSpeed", None),
-                getattr(raw, "vehicle_setSpeed", None),
+        fast = (getattr(raw, "vehicle_setSpeed", None),
                 getattr(raw, "vehicle_setLateralLanePosition", None))
         if None in fast:
-            return veh.setPreviousSpeed, veh.setSpeed, veh.setLateralLanePosition
+            return veh.setSpeed, veh.setLateralLanePosition
         return fast
 
     def collisions(self) -> list[tuple[str, str]]:

@@ -75,13 +75,23 @@ TRAJ_CASES: dict[str, tuple[str, dict, float]] = {
 #: and of 1 s (``scenario.cav_action_step_s``, used when no human drivers are on the road):
 #: the CAVs must move bit-identically (no reference file). The obstacle road has edge joints every
 #: 100 m and changeSublane moves; the ring junction lanes; the on-ramp an acceleration lane.
+#: CAV-only runs with the CAVs' SUMO action step of one step and of 1 s (their motion must
+#: be the same): (built-in scenario, overrides, duration s). ``width_drop`` is the headline's
+#: bottleneck at its demand: there the insertions at the entrance differed after 60 s while
+#: SUMO, given no --step-method.ballistic, switched to the ballistic update.
 ACTION_STEP_CASES: dict[str, tuple[str, dict, float]] = {
-    f"{scen}_asl_{a:g}": (scen, {**ov, "demand.cav_share": 1.0, "scenario.cav_action_step_s": a},
-                          40.0)
-    for scen, ov in (("obstacle", {"demand.inflow_vph": 3000.0, "scenario.seed": 5,
-                                   "obstacle.s_m": 320.0}),
-                     ("ring", {"scenario.seed": 2}),
-                     ("onramp", {"scenario.seed": 3}))
+    f"{name}_asl_{a:g}": (scen, {**ov, "demand.cav_share": 1.0, "scenario.cav_action_step_s": a},
+                          dur)
+    for name, scen, ov, dur in (
+        ("obstacle", "obstacle", {"demand.inflow_vph": 3000.0, "scenario.seed": 5,
+                                  "obstacle.s_m": 320.0}, 40.0),
+        ("ring", "ring", {"scenario.seed": 2}, 40.0),
+        ("onramp", "onramp", {"scenario.seed": 3}, 40.0),
+        ("width_drop", "default", {
+            "network.kind": "varying_width", "network.width_profile": [[600.0, 10.2],
+                                                                       [300.0, 6.8]],
+            "demand.inflow_vph": 7000.0, "demand.slot_headway_s": 0.75, "scenario.seed": 1,
+            "controller.params.time_gap_s": 0.6}, 60.0))
     for a in (0.1, 1.0)
 }
 TRAJ_EVERY = 10  # states
