@@ -680,7 +680,7 @@ def main(argv: list[str] | None = None) -> int:
         speedup_table(runs, duration).to_csv(out / "speedup.csv", index=False)
         plot_runs(out, runs, duration)
         return 0
-    runs_n = args.runs if args.runs is not None else (2 if args.smoke else 100)
+    runs_n = args.runs if args.runs is not None else (1 if args.smoke else 100)
     var_n = args.variant_runs if args.variant_runs is not None else min(runs_n, 30)
     duration = args.duration if args.duration is not None else (120.0 if args.smoke else 300.0)
     all_scenes = scenes(args.smoke)

@@ -411,7 +411,8 @@ def discharge_table(res: SweepResults, confidence: float = 0.95) -> pd.DataFrame
     ok = res.ok
     if ok.empty or "discharge_flow_vph" not in ok or "bottleneck_kind" not in ok:
         return pd.DataFrame()
-    ok = ok[ok["bottleneck_kind"].fillna("").astype(str) != ""]
+    kind = ok["bottleneck_kind"]  # NaN (a float column when no run found one) or a name
+    ok = ok[kind.notna() & (kind.astype(str) != "")]
     if ok.empty:
         return pd.DataFrame()
     rows = []

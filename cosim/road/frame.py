@@ -327,6 +327,30 @@ class _Tables:
     par: np.ndarray | None = None  # (lanes,) bool: the lane runs parallel to the line
     par_s0: np.ndarray | None = None  # (lanes,) s of its position 0, m
     par_d0: np.ndarray | None = None  # (lanes,) d of its centre, m
+    _kernel_args: tuple | None = field(default=None, repr=False, compare=False)
+
+    def kernel_args(self) -> tuple:
+        """The tables as one tuple for :func:`cosim.road.frame_kernels.geo_frame` and
+        ``geo_lateral`` (built once, after the measure and the parallel lanes are known)."""
+        if self._kernel_args is None:
+            c = np.ascontiguousarray
+            line, m = self.line, self.measure
+            n = len(self.lane_len)
+            par = np.zeros(n, dtype=bool) if self.par is None else self.par
+            s0 = np.zeros(n) if self.par_s0 is None else self.par_s0
+            d0 = np.zeros(n) if self.par_d0 is None else self.par_d0
+            args = (
+                c(self.lane_len, float), c(self.next_lane, np.int64), c(self.seg_key, float),
+                c(self.seg_p0, float), c(self.seg_scale, float), c(self.seg_a, float),
+                c(self.seg_t, float), c(self.seg_n, float), c(self.tab_key, float),
+                c(self.tab_g, float), c(line.pts, float), c(line.cum, float),
+                c(line.tan, float), c(line.seg, float), bool(line.periodic),
+                c(m.g, float), c(m.s, float), bool(m.periodic), float(m.g_period),
+                float(m.s_period), self.par is not None, c(par, bool), c(s0, float),
+                c(d0, float), float(_LANE_KEY), int(_MAX_WALK), float(_FOOT_EPS),
+            )
+            object.__setattr__(self, "_kernel_args", args)
+        return self._kernel_args
 
 
 def _lane_points(tb: _Tables, k: np.ndarray, pos: np.ndarray):
@@ -375,6 +399,57 @@ def _frame_geo(tb: _Tables, k: np.ndarray, pos: np.ndarray, lat: np.ndarray):
         if tb.measure.periodic:
             s = np.mod(s, tb.measure.s_period)
     return s, d
+
+
+def _lane_frame_numpy(tb: _Tables, k: np.ndarray, pos: np.ndarray, lat: np.ndarray):
+    """``RoadNetwork.lane_frame`` in numpy (the reference of ``frame_kernels.geo_frame``;
+    also the path of tables without a measure)."""
+    s = np.full(len(k), np.nan)
+    d = lat.astype(float, copy=True)
+    ok = k >= 0
+    if ok.all():
+        return _frame_of(tb, k, pos, lat)
+    if ok.any():
+        s[ok], d[ok] = _frame_of(tb, k[ok], pos[ok], lat[ok])
+    return s, d
+
+
+def _lateral_numpy(tb: _Tables, k: np.ndarray, pos: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """``RoadNetwork.lateral_lane_position`` in numpy (the reference of
+    ``frame_kernels.geo_lateral``)."""
+    lat = d.astype(float, copy=True)
+    ok = k >= 0
+    if not ok.any():
+        return lat
+    kk, dd = k[ok], d[ok]
+    pp = pos[ok]
+    if tb.par[kk].all() and (pp <= tb.lane_len[kk]).all():
+        lat[ok] = dd - tb.par_d0[kk]
+        return lat
+    for _ in range(3):  # a position past the lane's end lies on the lane after it
+        past = (pp > tb.lane_len[kk]) & (tb.next_lane[kk] >= 0)
+        if not past.any():
+            break
+        pp = np.where(past, pp - tb.lane_len[kk], pp)
+        kk = np.where(past, tb.next_lane[kk], kk)
+    par = tb.par[kk]
+    if par.all():
+        lat[ok] = dd - tb.par_d0[kk]
+        return lat
+    pt, nrm, key = _lane_points(tb, kk, pp)
+    line = tb.line
+    j = line.segment_of(np.interp(key, tb.tab_key, tb.tab_g))
+    for _ in range(4):  # the segment of the line depends a little on where it goes
+        _, d0 = line.project_on(pt, j)
+        t = line.tan[j]
+        cos = t[:, 0] * nrm[:, 1] - t[:, 1] * nrm[:, 0]  # d per metre of lat
+        guess = (dd - d0) / cos
+        j_new = line.holding(pt + guess[:, None] * nrm, j)
+        if np.array_equal(j_new, j):
+            break
+        j = j_new
+    lat[ok] = np.where(par, dd - tb.par_d0[kk], guess)
+    return lat
 
 
 # --------------------------------------------------------------------------------------
@@ -463,8 +538,10 @@ class RoadNetwork:
 
         ``s`` is the position of the point SUMO reports (the front bumper's centre) along
         the reference line (wrapped on the ring), ``d`` its signed offset. Lanes off the
-        routes give ``s = NaN`` and ``d = lat``. Vectorised; lanes by dict lookup, or
-        ``keys`` (N,) = :meth:`lane_keys` of them when the caller has them already.
+        routes give ``s = NaN`` and ``d = lat``. Lanes by dict lookup, or ``keys`` (N,) =
+        :meth:`lane_keys` of them when the caller has them already. Compiled
+        (:mod:`cosim.road.frame_kernels`; the same bits as :func:`_lane_frame_numpy`,
+        tests/test_frame_kernels.py).
         """
         pos = np.asarray(pos_m, dtype=float)
         lat = np.asarray(lat_m, dtype=float)
@@ -477,14 +554,9 @@ class RoadNetwork:
                                          tb.measure.periodic, float(tb.measure.s_period))
             if ok:
                 return s, d
-        s = np.full(len(k), np.nan)
-        d = lat.astype(float, copy=True)
-        ok = k >= 0
-        if ok.all():
-            return _frame_of(self.tables, k, pos, lat)
-        if ok.any():
-            s[ok], d[ok] = _frame_of(self.tables, k[ok], pos[ok], lat[ok])
-        return s, d
+            return FK.geo_frame(np.ascontiguousarray(k, np.int64), np.ascontiguousarray(
+                pos, float), np.ascontiguousarray(lat, float), tb.kernel_args())
+        return _lane_frame_numpy(tb, k, pos, lat)
 
     def lateral_lane_position(self, lanes: Sequence[str] | None, pos_m: np.ndarray,
                               d_m: np.ndarray, keys: np.ndarray | None = None) -> np.ndarray:
@@ -494,51 +566,24 @@ class RoadNetwork:
         step (SUMO keeps the lateral lane position while it moves, also onto the next
         lane): a position past the lane's end is taken on the route lane after it, whose
         centre may lie elsewhere (a junction lane). Off-route lanes: ``lat = d``. ``keys``:
-        :meth:`lane_keys` of ``lanes``, when the caller has them already."""
+        :meth:`lane_keys` of ``lanes``, when the caller has them already.
+
+        Compiled (:mod:`cosim.road.frame_kernels`; the same bits as
+        :func:`_lateral_numpy`, tests/test_frame_kernels.py)."""
         pos = np.asarray(pos_m, dtype=float)
         d = np.asarray(d_m, dtype=float)
         k = self.lane_keys(lanes) if keys is None else keys
         tb = self.tables
-        if tb.par is not None and len(k):  # every lane reached parallel to the line
+        if tb.par is not None and tb.measure is not None and len(k):
             from cosim.road import frame_kernels as FK
 
             lat, ok = FK.parallel_lateral(k, pos, d, tb.lane_len, tb.next_lane, tb.par,
                                           tb.par_d0)
             if ok:
                 return lat
-        lat = d.astype(float, copy=True)
-        ok = k >= 0
-        if not ok.any():
-            return lat
-        kk, dd = k[ok], d[ok]
-        pp = pos[ok]
-        if tb.par[kk].all() and (pp <= tb.lane_len[kk]).all():
-            lat[ok] = dd - tb.par_d0[kk]
-            return lat
-        for _ in range(3):  # a position past the lane's end lies on the lane after it
-            past = (pp > tb.lane_len[kk]) & (tb.next_lane[kk] >= 0)
-            if not past.any():
-                break
-            pp = np.where(past, pp - tb.lane_len[kk], pp)
-            kk = np.where(past, tb.next_lane[kk], kk)
-        par = tb.par[kk]
-        if par.all():
-            lat[ok] = dd - tb.par_d0[kk]
-            return lat
-        pt, nrm, key = _lane_points(tb, kk, pp)
-        line = tb.line
-        j = line.segment_of(np.interp(key, tb.tab_key, tb.tab_g))
-        for _ in range(4):  # the segment of the line depends a little on where it goes
-            _, d0 = line.project_on(pt, j)
-            t = line.tan[j]
-            cos = t[:, 0] * nrm[:, 1] - t[:, 1] * nrm[:, 0]  # d per metre of lat
-            guess = (dd - d0) / cos
-            j_new = line.holding(pt + guess[:, None] * nrm, j)
-            if np.array_equal(j_new, j):
-                break
-            j = j_new
-        lat[ok] = np.where(par, dd - tb.par_d0[kk], guess)
-        return lat
+            return FK.geo_lateral(np.ascontiguousarray(k, np.int64), np.ascontiguousarray(
+                pos, float), np.ascontiguousarray(d, float), tb.kernel_args())
+        return _lateral_numpy(tb, k, pos, d)
 
     def xy_of(self, s_m: np.ndarray, d_m: np.ndarray) -> np.ndarray:
         """``(x, y)`` (N, 2) in the network's coordinates of road-frame positions (m)."""

@@ -2,8 +2,9 @@
 
 Execution: one process per run, because libsumo holds one simulation per process.
 Locally a ``ProcessPoolExecutor`` (spawn, ``max_tasks_per_child=1``; ``--start-method
-forkserver`` forks each run from a server that preloaded numpy/pandas/cosim, never SUMO,
-which saves ~1.5-2.5 s of imports per run on a busy 2-core machine); on Dask
+forkserver`` forks each run from a server that preloaded cosim, libsumo's library and the
+numba kernels, never a SUMO simulation (:mod:`cosim.sim.preload`), which saves the imports
+and the kernels' cache loads of every run, ~1.5-2.5 s on a busy 2-core machine); on Dask
 (``--scheduler ADDRESS`` or ``--dask-local N``) each task starts its run in a fresh
 subprocess of the Dask worker. A run that raises is recorded ``failed`` with its reason;
 a worker process that dies (crash, ``kill``) breaks the local pool: its run is recorded
@@ -392,14 +393,15 @@ Sink = Callable[[dict], None]
 
 def _mp_context(start_method: str):
     """``spawn`` (default): every run in a fresh interpreter. ``forkserver``: runs are
-    forked from a server process that imported numpy/pandas/scipy and cosim once (never
-    SUMO), which saves that import (~1.5-2.5 s per run on a busy 2-core machine)."""
+    forked from a server process that loaded cosim, libsumo's library and the numba
+    kernels once (:mod:`cosim.sim.preload`; never a SUMO simulation), which saves that
+    start-up (~1.5-2.5 s per run on a busy 2-core machine)."""
     if start_method not in START_METHODS:
         raise ConfigError(f"start method must be one of {', '.join(START_METHODS)}, "
                           f"got {start_method!r}")
     ctx = multiprocessing.get_context(start_method)
     if start_method == "forkserver":
-        ctx.set_forkserver_preload(["cosim.sim.runner", "cosim.sweeps.execute"])
+        ctx.set_forkserver_preload(["cosim.sim.preload", "cosim.sweeps.execute"])
     return ctx
 
 

@@ -1,11 +1,12 @@
 """Run a function in a process of its own, without paying the imports each time.
 
 SUMO tests run every simulation in its own process (libsumo keeps global state). A new
-interpreter costs about a second of imports (numpy, pandas, numba's cache, cosim) before
-the simulation starts; :func:`run_isolated` forks each process instead from a server
-process that has imported cosim once (``multiprocessing``'s ``forkserver``: the server
-is single-threaded and has never started SUMO, so every child starts clean). One server
-per test process, started on first use.
+interpreter costs about two seconds of imports and first calls (numpy, pandas, cosim,
+libsumo's library, numba's cached kernels) before the simulation runs; :func:`run_isolated`
+forks each process instead from a server process that has loaded all of it once
+(``multiprocessing``'s ``forkserver`` with :mod:`cosim.sim.preload`: the server is
+single-threaded and has never started a SUMO simulation, so every child starts clean).
+One server per test process, started on first use.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from collections.abc import Callable
 from typing import Any
 
 #: modules the server imports once, so that children start with them loaded
-PRELOAD = ["cosim.config", "cosim.sim.runner"]
+PRELOAD = ["cosim.sim.preload"]
 
 _context = None
 
