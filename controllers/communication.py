@@ -34,6 +34,14 @@ received states of the others (the HIOA ``send_i``/``recv_ij`` model, Figs.
   reference/leader, obstacles, walls, road edges, sensed non-cooperating
   vehicles) is taken from the true observation at the update instant.
 
+A law with memory of its own agents (``memory_per_agent = True``, as the lane-free law:
+lateral targets and their hysteresis, yields, the past speeds of sensed vehicles) gets
+one copy per agent when it is called on per-agent views: agent ``i``'s copy sees only
+``i``'s views, so its memory is what agent ``i`` remembered (one shared instance would be
+called once per agent and step, and would take every agent for a newcomer in every call).
+A copy is made from the law as it was at :meth:`CommunicatingController.reset` and is
+dropped when its agent leaves. A step whose views are all the truth calls the shared law.
+
 Per step the order is: clocks, send, deliver, expire, compute. With zero delay,
 no loss, ``r_comm`` covering the flock and ``period_s <= dt`` (synchronous)
 every view is the true state and the wrapped law is reproduced exactly.
@@ -85,6 +93,7 @@ they act on the held command every step and keep their per-id memory.
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, field, fields
 
@@ -304,6 +313,13 @@ class CommunicatingController:
         self._m: int | None = None
         self._buf: _Msgs | None = None
         self._pending: _Msgs | None = None
+        reset_law = getattr(self.law, "reset", None)
+        if callable(reset_law):
+            reset_law()
+        # per-agent copies of a law with memory of its own agents (module docstring)
+        self._per_agent = bool(getattr(self.law, "memory_per_agent", False))
+        self._blank = copy.deepcopy(self.law) if self._per_agent else None
+        self._agent_laws: dict = {}
 
     # ------------------------------------------------------------------ public
     def compute(self, obs: Observation) -> np.ndarray:
@@ -327,6 +343,10 @@ class CommunicatingController:
         self._expire(t, tol)
         if due.any():
             self._update(obs, slots, due, t, tol)
+        if self._agent_laws and len(self._agent_laws) > n:  # agents that left
+            present = set(list(obs.ids))
+            for gone in [a for a in self._agent_laws if a not in present]:
+                del self._agent_laws[gone]
         return self._u[slots].copy()
 
     def buffer_view(self, receiver_id) -> dict:
@@ -488,16 +508,25 @@ class CommunicatingController:
                 "batching='union' needs walls parallel to the block axis and m >= 2 on a ring"
             )
         if self.batching == "loop" or axis is None or len(egos) == 1:
-            u = np.vstack([self._call(blocks.single(obs, b))[0] for b in range(len(egos))])
+            u = np.vstack([self._call(blocks.single(obs, b), self._id_of[ego_slots[b]])[0]
+                           for b in range(len(egos))])
         else:
             union = blocks.union(obs, axis, self.block_gap_m)
             self.stats.union_rows += union.n
             u = self._call(union)[blocks.ego_rows]
         self._u[ego_slots] = u
 
-    def _call(self, view: Observation) -> np.ndarray:
+    def _call(self, view: Observation, agent=None) -> np.ndarray:
+        """The law's commands (rows of ``view``, m/s^2) on one agent's view (``agent``: its
+        id: a law with memory of its own agents runs as that agent's copy) or on the
+        union of views (``agent`` None: the shared law)."""
         self.stats.law_calls += 1
-        u = np.asarray(self.law.compute(view), dtype=float)
+        law = self.law
+        if self._per_agent and agent is not None:
+            law = self._agent_laws.get(agent)
+            if law is None:
+                law = self._agent_laws[agent] = copy.deepcopy(self._blank)
+        u = np.asarray(law.compute(view), dtype=float)
         if u.shape != view.q.shape:
             raise ValueError(f"law returned u of shape {u.shape}, expected {view.q.shape}")
         return u

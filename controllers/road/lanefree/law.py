@@ -62,6 +62,9 @@ class LaneFreeFlocking:
     """
 
     name = "flocking"
+    #: its memory (lateral targets, yields, sensed vehicles' past speeds) is of the CAVs it
+    #: computes for: on per-agent views (the communication layer) each CAV gets a copy
+    memory_per_agent = True
 
     def __init__(self, params: LaneFreeParams, ctx=None) -> None:
         self.params = params
