@@ -1,10 +1,17 @@
-"""Compiled fast paths of the road frame (:mod:`cosim.road.frame`) for lanes that run
-parallel to the reference line: every lane of the networks cosim builds, a user's straight
-lanes. The SUMO world maps every vehicle through them every step; as numpy each call was a
-dozen small array operations. Each kernel returns ``ok = False`` as soon as a vehicle is on
-a lane it does not handle, and the caller then takes the numpy path, which projects onto
-the line. Where a kernel answers, it does the numpy path's arithmetic element by element:
-the same bits (tests/test_exactness.py, tests/test_road_frame.py).
+"""Compiled paths of the road frame (:mod:`cosim.road.frame`): SUMO's (lane, position,
+lateral position) to the road frame's (s, d) and back, every vehicle, every step.
+
+* ``parallel_frame`` / ``parallel_lateral``: lanes that run parallel to the reference line
+  (every lane of the networks cosim builds, a user's straight lanes): ``s = s0 + pos``,
+  ``d = d0 + lat``. They return ``ok = False`` as soon as a vehicle is on another lane.
+* ``geo_frame`` / ``geo_lateral``: any lanes (a user's kinks and bends, netconvert's
+  junction lanes, a ramp): the point SUMO computes on the lane, projected onto the
+  reference line (and back), as the numpy reference ``frame._lane_frame_numpy`` and
+  ``frame._lateral_numpy`` do.
+
+Each does the numpy path's arithmetic element by element, in the same order (numpy's
+``interp``, ``searchsorted``, ``mod`` and ``clip`` branch for branch): the same bits
+(tests/test_frame_kernels.py, tests/test_exactness.py, tests/test_road_frame.py).
 """
 
 from __future__ import annotations
