@@ -20,6 +20,19 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, inline="always")
+def _lane_reached(kk, pp, lane_len, next_lane):
+    """Lane and lane position ``(kk, pp)`` where position ``pp`` (m) on lane ``kk`` lies: a
+    position past a lane's end is on the route lane after it (at most three lanes on)."""
+    for _ in range(3):
+        if pp > lane_len[kk] and next_lane[kk] >= 0:
+            pp = pp - lane_len[kk]
+            kk = next_lane[kk]
+        else:
+            break
+    return kk, pp
+
+
 @njit(cache=True)
 def parallel_frame(k, pos, lat, par, par_s0, par_d0, periodic, s_period):
     """Road-frame ``(s, d, ok)`` of SUMO positions: ``s = s0 + pos``, ``d = d0 + lat``.
@@ -58,13 +71,7 @@ def parallel_lateral(k, pos, d, lane_len, next_lane, par, par_d0):
         if kk < 0:
             lat[i] = d[i]
             continue
-        pp = pos[i]
-        for _ in range(3):
-            if pp > lane_len[kk] and next_lane[kk] >= 0:
-                pp = pp - lane_len[kk]
-                kk = next_lane[kk]
-            else:
-                break
+        kk, pp = _lane_reached(kk, pos[i], lane_len, next_lane)
         if not par[kk]:
             return lat, False
         lat[i] = d[i] - par_d0[kk]
@@ -292,13 +299,7 @@ def geo_lateral(k, pos, d, tables):
         if kk < 0:
             lat[i] = d[i]
             continue
-        pp = pos[i]
-        for _ in range(3):
-            if pp > lane_len[kk] and next_lane[kk] >= 0:
-                pp = pp - lane_len[kk]
-                kk = next_lane[kk]
-            else:
-                break
+        kk, pp = _lane_reached(kk, pos[i], lane_len, next_lane)
         if par[kk]:
             lat[i] = d[i] - par_d0[kk]
             continue

@@ -7,9 +7,10 @@ started: the server stays single-threaded and never holds SUMO's global state) a
 numba kernel the runs call, read back from numba's cache by a few seconds of each
 built-in scenario in the SUMO-free road world (:func:`cosim.sim.warm.warm_road_world`;
 nothing is written). A forked run then starts with all of it in memory. Without it, a
-first run in a fresh process costs about 0.9 s more than the same run again (the cache
-files read back, modules imported where first used); ``python -m cosim.sim.preload``
-times a short run twice after the preload, to show the first costs what the second does.
+first run in a fresh process costs more than the same run again (the cache files read
+back, modules imported where first used): ``benchmarks/bench_startup.py`` times both
+(a 60 s ring run: 1.39 s then 0.91 s fresh, 0.92 s both after the preload);
+``python -m cosim.sim.preload`` times a short run twice after the preload.
 """
 
 from __future__ import annotations
