@@ -1,8 +1,9 @@
 """Run a function in a process of its own, without paying the imports each time.
 
 SUMO tests run every simulation in its own process (libsumo keeps global state). A new
-interpreter costs about two seconds of imports and first calls (numpy, pandas, cosim,
-libsumo's library, numba's cached kernels) before the simulation runs; :func:`run_isolated`
+child without them pays the imports and first calls (numpy, pandas, cosim, libsumo's
+library, numba's cached kernels) before the simulation runs (a built-in scenario's 90 s
+test run: 2.75 s, against 1.58 s with them preloaded); :func:`run_isolated`
 forks each process instead from a server process that has loaded all of it once
 (``multiprocessing``'s ``forkserver`` with :mod:`cosim.sim.preload`: the server is
 single-threaded and has never started a SUMO simulation, so every child starts clean).
