@@ -57,6 +57,7 @@ import math
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -77,6 +78,8 @@ _LANE_KEY = float(2**24)
 _MAX_WALK = 64
 #: Slack (m) when deciding whether a projection's foot lies inside a segment.
 _FOOT_EPS = 1e-6
+#: Up to this many segments :meth:`_Line.nearest` measures every point against all.
+_NEAREST_ALL_MAX = 64
 
 
 # --------------------------------------------------------------------------------------
@@ -171,26 +174,75 @@ class _Line:
         return lo & hi
 
     def nearest(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(s, d, j)`` of the nearest point of the line to each point (open lines are
-        extended beyond their ends). Build-time only: K points x M segments in chunks."""
+        """``(s, d, j)`` (K,) each of the nearest point of the line to each point ``xy``
+        (K, 2) m (open lines are extended beyond their ends). Build-time only.
+
+        Each point is measured against the segments that can hold its nearest point
+        (:meth:`_candidates`: O(K log M) with a tree of the segments' middles, not K x M);
+        :meth:`_nearest_among` measures them as the full search would, so the answer is
+        the same to the bit (tests/test_road_frame.py)."""
+        if self.n_seg <= _NEAREST_ALL_MAX or len(xy) == 0:
+            return self._nearest_among(xy, None)
+        return self._nearest_among(xy, self._candidates(xy))
+
+    @cached_property
+    def _middles(self):
+        """A tree of the segments' middles and the longest half segment, m."""
+        from scipy.spatial import cKDTree  # scipy: imported when first used
+
+        return cKDTree(0.5 * (self.pts[:-1] + self.pts[1:])), 0.5 * float(self.seg.max())
+
+    def _candidates(self, xy: np.ndarray) -> np.ndarray:
+        """Segment indices (K, C), ascending in each row (a row's last repeated as padding),
+        that include every segment nearest to each point.
+
+        A segment's distance is at most that of its middle and at least the middle's less
+        half its length, so the nearest lie within (distance to the nearest middle) + (the
+        longest half segment) of their middles; an open line's end segments, extended
+        without end, are always candidates."""
+        tree, half_max = self._middles
+        r0, _ = tree.query(xy)
+        reach = r0 + half_max + 1e-6 + 1e-9 * r0  # rounding's slack
+        lists = tree.query_ball_point(xy, reach)
+        if not self.periodic:
+            ends = [0, self.n_seg - 1]
+            lists = [lst + ends for lst in lists]
+        size = np.fromiter(map(len, lists), dtype=np.int64, count=len(lists))
+        cand = np.full((len(lists), int(size.max())), self.n_seg, dtype=np.int64)
+        rows = np.repeat(np.arange(len(lists)), size)
+        cols = np.arange(len(rows)) - np.repeat(np.cumsum(size) - size, size)
+        cand[rows, cols] = np.concatenate([np.asarray(lst, dtype=np.int64) for lst in lists])
+        cand.sort(axis=1)
+        last = cand[np.arange(len(cand)), size - 1]
+        return np.where(cand == self.n_seg, last[:, None], cand)
+
+    def _nearest_among(self, xy: np.ndarray, cand: np.ndarray | None
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`nearest` over the segments ``cand`` (K, C) of each point (ascending; a
+        repeat only after its first place), or over all of them (None), in chunks."""
         k = len(xy)
         s_out, d_out, j_out = np.empty(k), np.empty(k), np.empty(k, dtype=int)
-        chunk = max(1, 2_000_000 // max(self.n_seg, 1))
+        width = self.n_seg if cand is None else cand.shape[1]
+        chunk = max(1, 2_000_000 // max(width, 1))
+        lo_all = np.zeros(self.n_seg)
+        hi_all = self.seg.copy()
+        if not self.periodic:
+            lo_all[0], hi_all[-1] = -np.inf, np.inf
         for a in range(0, k, chunk):
             p = xy[a:a + chunk]
-            v = p[:, None, :] - self.pts[None, :-1, :]
-            along = np.einsum("kmi,mi->km", v, self.tan)
-            lo = np.zeros(self.n_seg)
-            hi = self.seg.copy()
-            if not self.periodic:
-                lo[0], hi[-1] = -np.inf, np.inf
-            t = np.clip(along, lo, hi)
-            foot = self.pts[None, :-1, :] + t[:, :, None] * self.tan[None, :, :]
-            dist = np.hypot(p[:, None, 0] - foot[:, :, 0], p[:, None, 1] - foot[:, :, 1])
-            j = np.argmin(dist, axis=1)
             r = np.arange(len(p))
-            s_out[a:a + chunk] = self.cum[j] + t[r, j]
-            vv = v[r, j]
+            c = (np.broadcast_to(np.arange(self.n_seg), (len(p), self.n_seg)) if cand is None
+                 else cand[a:a + chunk])
+            start, tan = self.pts[c], self.tan[c]  # (k, C, 2)
+            v = p[:, None, :] - start
+            along = v[:, :, 0] * tan[:, :, 0] + v[:, :, 1] * tan[:, :, 1]
+            t = np.clip(along, lo_all[c], hi_all[c])
+            foot = start + t[:, :, None] * tan
+            dist = np.hypot(p[:, None, 0] - foot[:, :, 0], p[:, None, 1] - foot[:, :, 1])
+            col = np.argmin(dist, axis=1)
+            j = c[r, col]
+            s_out[a:a + chunk] = self.cum[j] + t[r, col]
+            vv = v[r, col]
             tt = self.tan[j]
             d_out[a:a + chunk] = tt[:, 0] * vv[:, 1] - tt[:, 1] * vv[:, 0]
             j_out[a:a + chunk] = j
@@ -1315,7 +1367,8 @@ def _road_network(path: Path, net: Any, kind: str, main_route: Sequence[str],
         measure.to_s(np.array([line.length]))[0])
     s0, right, left, spans = _profile(tb, lanes, net, main_route, periodic, length)
 
-    all_ids = [g.lane_id for g in lanes] + [e for e in index if e not in {g.lane_id for g in lanes}]
+    route_lanes = {g.lane_id for g in lanes}
+    all_ids = [g.lane_id for g in lanes] + [e for e in index if e not in route_lanes]
     ks = np.array([index[x] for x in all_ids])
     s_start, _ = _frame_of(tb, ks, np.zeros(len(ks)), np.zeros(len(ks)))
     _, d_mid = _frame_of(tb, ks, 0.5 * tb.lane_len[ks], np.zeros(len(ks)))
