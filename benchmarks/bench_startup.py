@@ -5,11 +5,17 @@ Usage::
 
     .venv/bin/python benchmarks/bench_startup.py            # ring, 60 s; about 20 s
     .venv/bin/python benchmarks/bench_startup.py --scenario default
+    .venv/bin/python benchmarks/bench_startup.py --frames 2 10 40   # road frames only
 
 Each variant runs in its own process (libsumo holds one simulation per process), the
 variants interleaved over ``--rounds``; per variant the medians of the first and second
 run (wall s: imports and numba's cache reads are what differ) and their difference, the
 start-up the first run pays.
+
+``--frames KM ...``: the road frame of a ring of each circumference (the network built
+once, cached), CPU s of ``build_network`` with the reference line's nearest-point search
+as it is and with the full search it replaced (tests/test_line_nearest.py's verbatim copy
+of it: every point against every segment), interleaved over ``--rounds``, medians.
 """
 
 from __future__ import annotations
@@ -42,10 +48,51 @@ def child(name: str, preload: bool) -> list[float]:
     return out
 
 
+def frames(kms: list[float], rounds: int) -> int:
+    """Print the road-frame build of rings of ``kms`` km, the search as it is and full."""
+    import tempfile
+
+    sys.path.insert(0, str(ROOT))
+    sys.path.insert(0, str(ROOT / "tests"))
+    import dataclasses
+
+    from test_line_nearest import _nearest_full
+
+    from cosim.config import load_scenario
+    from cosim.road import frame as F
+    from cosim.road.build import build_network
+
+    pruned = F._Line.nearest
+    cache = Path(tempfile.mkdtemp(prefix="bench_frames_"))
+    specs = {km: dataclasses.replace(load_scenario("ring").network,
+                                     circumference_m=1000.0 * km) for km in kms}
+    for spec in specs.values():  # netconvert once per ring, and the kernels loaded
+        build_network(spec, cache)
+    cpu: dict[tuple[float, str], list[float]] = {}
+    for _ in range(rounds):
+        for km, spec in specs.items():
+            for variant, fn in (("pruned", pruned), ("full", _nearest_full)):
+                F._Line.nearest = fn
+                c0 = time.process_time()
+                build_network(spec, cache)
+                cpu.setdefault((km, variant), []).append(time.process_time() - c0)
+    F._Line.nearest = pruned
+    print(f"bench_startup --frames: a ring's road frame (build_network, network cached), "
+          f"CPU s, medians of {rounds} interleaved round(s)")
+    print(f"{'ring km':>8}{'search as is':>14}{'full search':>13}{'full / as is':>14}")
+    for km in kms:
+        a = statistics.median(cpu[(km, "pruned")])
+        b = statistics.median(cpu[(km, "full")])
+        print(f"{km:8g}{a:14.3f}{b:13.3f}{b / a:14.1f}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default="ring", help="built-in scenario (default ring)")
     ap.add_argument("--rounds", type=int, default=3, help="interleaved rounds (default 3)")
+    ap.add_argument("--frames", nargs="+", type=float, metavar="KM",
+                    help="time the road frames of rings of these circumferences, km")
     ap.add_argument("--child", nargs=2, help=argparse.SUPPRESS)
     ns = ap.parse_args(argv)
     if ns.child:
@@ -55,6 +102,11 @@ def main(argv: list[str] | None = None) -> int:
     if ns.rounds < 1:
         print("error: --rounds must be >= 1", file=sys.stderr)
         return 2
+    if ns.frames is not None:
+        if not all(0.2 <= km <= 200.0 for km in ns.frames):
+            print("error: --frames takes circumferences from 0.2 to 200 km", file=sys.stderr)
+            return 2
+        return frames(ns.frames, ns.rounds)
     times: dict[str, list[list[float]]] = {"fresh": [], "preloaded": []}
     for _ in range(ns.rounds):
         for variant, flag in (("fresh", "0"), ("preloaded", "1")):
