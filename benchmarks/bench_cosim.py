@@ -43,6 +43,17 @@ Usage::
     .venv/bin/python benchmarks/bench_cosim.py            # 300 s, 3 rounds; 30 s rings
     .venv/bin/python benchmarks/bench_cosim.py --quick    # 60 s, 1 round; 8 s rings (CI)
     .venv/bin/python benchmarks/bench_cosim.py --rounds 5 --duration 120 --no-scaling
+    .venv/bin/python benchmarks/bench_cosim.py --cache-probe   # rings only, ~1 min
+
+The scaling table ends with the line ``a + b N`` through the Python side's cost per step
+at the two smallest N: ``a`` is paid per step whatever N (what makes a small N cost more
+per vehicle; at the largest N the cost per vehicle grows again, with SUMO's, as the
+vehicles' data outgrow the caches, so a fit over all N would hide ``a``).
+``--cache-probe`` asks how much of it is the caches SUMO's step leaves cold: on
+the rings of N = 100 and 500, every other step from ``SCALE_SKIP`` on runs without SUMO's
+step (the world's ``step`` replaced by a no-op for that step, so the vehicles stand still
+and the Python phases run as usual), and it prints the Python side per step after SUMO's
+step and without it.
 """
 
 from __future__ import annotations
@@ -75,6 +86,7 @@ VARIANTS = ("sumo", "floor", "floor.1s", "cosim.0.1s", "cosim")
 SCALE_N = (100, 500, 1000, 2000)
 SCALE_LENGTH_M = 10000.0
 SCALE_SKIP = 20  # steps left out of the per-vehicle-step figures (start, first calls)
+PROBE_N = (100, 500)  # the rings of --cache-probe
 
 
 # ======================================================================================
@@ -144,6 +156,8 @@ def child(p: dict) -> dict:
         loop.hooks.add("control", first_control("before"), "before")
         loop.hooks.add("control", first_control("after"), "after")
         loop.hooks.add("record", snapshot)
+        if p.get("probe"):
+            _probe(loop, timers[0], skip, out)
 
     c0, w0 = time.process_time(), time.perf_counter()
     res = run_scenario(sc, hooks=hooks)
@@ -159,13 +173,40 @@ def child(p: dict) -> dict:
     return out
 
 
+def _probe(loop, timer, skip: int, out: dict) -> None:
+    """From step ``skip`` on, every other step runs without SUMO's step (the world's
+    ``step`` is a no-op then: the vehicles stand where they were, the Python phases run as
+    usual); CPU s of the Python phases in the steps after SUMO's step (``cold``: SUMO's
+    step has just run through the caches) and in those without it (``warm``)."""
+    world, real_step = loop.world, loop.world.step
+    out["probe"] = {"cold": [0.0, 0], "warm": [0.0, 0]}
+    last = {"py": 0.0}
+
+    def python_s() -> float:
+        return sum(v for k, v in timer.cpu_s.items() if k != "advance")
+
+    def before(st):
+        warm = st.k >= skip and st.k % 2 == 1
+        world.step = (lambda: None) if warm else real_step
+        last["py"], last["warm"] = python_s(), warm
+
+    def after(st):
+        if st.k >= skip:
+            acc = out["probe"]["warm" if last["warm"] else "cold"]
+            acc[0] += python_s() - last["py"]
+            acc[1] += 1
+
+    loop.hooks.add("advance", before, "before")
+    loop.hooks.add("record", after, "after")
+
+
 # ======================================================================================
 # Parent
 # ======================================================================================
 
 
-def run_cosim(scenario: str, overrides: dict, skip: int = 0) -> dict:
-    payload = {"scenario": scenario, "overrides": overrides, "skip": skip}
+def run_cosim(scenario: str, overrides: dict, skip: int = 0, probe: bool = False) -> dict:
+    payload = {"scenario": scenario, "overrides": overrides, "skip": skip, "probe": probe}
     c0, w0 = bf._children_cpu(), time.perf_counter()
     env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
     proc = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--child",
@@ -271,6 +312,40 @@ def print_scaling(scale: dict, duration_s: float) -> None:
         xs = [v[k] for v in per_n.values()]
         print(f"{name} per vehicle-step: {min(xs):.2f}-{max(xs):.2f} us over N = "
               f"{min(per_n)}..{max(per_n)} (largest / smallest {max(xs) / min(xs):.2f})")
+    small = sorted(per_n)[:2]
+    fixed_us, per_veh_us = _fit_fixed({n: per_n[n] for n in small})
+    print(f"Python side per step through N = {small[0]} and {small[1]}: {fixed_us:.0f} us + "
+          f"{per_veh_us:.2f} us x N (the fixed part: paid per step whatever N)")
+
+
+def _fit_fixed(per_n: dict) -> tuple[float, float]:
+    """Least-squares ``a + b N`` of the Python side's cost per step (us) over the N of
+    ``per_n`` (N -> (SUMO, Python, total) us per vehicle-step): (a us, b us per vehicle)."""
+    ns = list(per_n)
+    ys = [per_n[n][1] * n for n in ns]
+    mn, my = sum(ns) / len(ns), sum(ys) / len(ys)
+    b = sum((n - mn) * (y - my) for n, y in zip(ns, ys, strict=True)) / sum(
+        (n - mn) ** 2 for n in ns)
+    return my - b * mn, b
+
+
+def print_probe(probe: dict, duration_s: float) -> None:
+    """Python side per step after SUMO's step and without it (``--cache-probe``)."""
+    rounds = len(next(iter(probe.values())))
+    print(f"\nCache probe, {SCALE_LENGTH_M / 1000:g} km ring, {duration_s:g} s, steps "
+          f"{SCALE_SKIP}+: every other step without SUMO's step; Python side, us per step, "
+          f"medians of {rounds} round(s)")
+    print(f"{'N':>6}{'after SUMO':>12}{'without':>10}{'difference':>12}")
+    rows = {}
+    for n, runs in probe.items():
+        cold = bf._med([1e6 * r["probe"]["cold"][0] / r["probe"]["cold"][1] for r in runs])
+        warm = bf._med([1e6 * r["probe"]["warm"][0] / r["probe"]["warm"][1] for r in runs])
+        rows[n] = (cold, warm)
+        print(f"{n:>6}{cold:12.0f}{warm:10.0f}{cold - warm:12.0f}")
+    if len(rows) >= 2:
+        for k, name in ((0, "after SUMO's step"), (1, "without it")):
+            a, b = _fit_fixed({n: (None, v[k] / n) for n, v in rows.items()})
+            print(f"fixed part {name}: {a:.0f} us + {b:.2f} us x N")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -282,6 +357,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scale-duration", type=float, default=None,
                     help="horizon of the ring runs, s (default 30)")
     ap.add_argument("--no-scaling", action="store_true", help="skip the N = 100..2000 rings")
+    ap.add_argument("--cache-probe", action="store_true",
+                    help="only the rings at N = 100 and 500, every other step without "
+                         "SUMO's step: the Python side with and without SUMO's step between")
     ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     ns = ap.parse_args(argv)
     if ns.child is not None:
@@ -310,6 +388,14 @@ def bench(ns) -> int:
         raise ConfigError(f"--scale-duration must be at least {(SCALE_SKIP + 10) * bf.STEP_S:g}"
                           f" s, got {scale_s:g}")
     t_start = time.perf_counter()
+    if ns.cache_probe:
+        probe: dict[int, list[dict]] = {n: [] for n in PROBE_N}
+        for r in range(rounds):
+            for n in PROBE_N[r % 2:] + PROBE_N[:r % 2]:
+                probe[n].append(run_cosim("ring", ring_overrides(n, scale_s), skip=SCALE_SKIP,
+                                          probe=True))
+        print_probe(probe, scale_s)
+        return 0
     print(f"bench_cosim: {bf.LENGTH_M:g} m x {bf.WIDTH_M:g} m straight road, "
           f"{bf.INFLOW_VPH:g} veh/h, 100 % CAVs, {duration:g} s, step {bf.STEP_S:g} s, lateral "
           f"resolution {bf.BASE_RES_M:g} m, collision.action warn, seed {bf.SEED}; {rounds} "
