@@ -43,7 +43,7 @@ Usage::
     .venv/bin/python benchmarks/bench_cosim.py            # 300 s, 3 rounds; 30 s rings
     .venv/bin/python benchmarks/bench_cosim.py --quick    # 60 s, 1 round; 8 s rings (CI)
     .venv/bin/python benchmarks/bench_cosim.py --rounds 5 --duration 120 --no-scaling
-    .venv/bin/python benchmarks/bench_cosim.py --cache-probe   # rings only, ~1 min
+    .venv/bin/python benchmarks/bench_cosim.py --cache-probe   # rings only, ~15 s
 
 The scaling table ends with the line ``a + b N`` through the Python side's cost per step
 at the two smallest N: ``a`` is paid per step whatever N (what makes a small N cost more

@@ -19,6 +19,8 @@ import math
 import numpy as np
 from numba import njit
 
+from controllers import profile_kernels as PK
+
 # ------------------------------------------------------------------ scalar parameters
 #: Names of the scalars in ``P`` (see :func:`pack`), in order.
 NAMES = (
@@ -670,26 +672,28 @@ def narrowing_bound(P, s, d, v, width, length, n, s0, right, left, periodic, per
     move sideways before it gets there (``half_lat_speed t`` and ``quarter_a_lat t^2``, and
     the room to its side bounds ``hi_n``, ``lo_n`` (N,) m); inf if none. Also whether any
     CAV has such a piece."""
-    k_n = s0.shape[0]
     out = np.full(n, np.inf)
     any_wall = False
+    win = np.empty((PK._MAX_WINDOWS, 2), dtype=np.int64)
     for i in range(n):
         hw = 0.5 * width[i] + 0.1
         look = max(look_min, v[i] * look_s)
         v1 = max(v[i], 1.0)
         best = np.inf
-        for k in range(k_n):
-            ds = s0[k] - s[i]
-            if periodic:
-                ds = ds % period
-            need = max(right[k] - (d[i] - hw), (d[i] + hw) - left[k])
-            t = max(ds, 0.0) / v1
-            can = min(half_lat_speed * t, quarter_a_lat * (t * t))
-            room = hi_n[i] - d[i] if right[k] > d[i] - hw else d[i] - lo_n[i]
-            can = min(can, max(room, 0.0) + 0.1)
-            if ds > 0 and ds < look and need > can:
-                any_wall = True
-                best = min(best, ds)
+        # only the pieces that can start within (0, look) ahead (the same test on each)
+        for w in range(PK.ahead_windows(s0, s[i], look, periodic, period, win)):
+            for k in range(win[w, 0], win[w, 1]):
+                ds = s0[k] - s[i]
+                if periodic:
+                    ds = ds % period
+                need = max(right[k] - (d[i] - hw), (d[i] + hw) - left[k])
+                t = max(ds, 0.0) / v1
+                can = min(half_lat_speed * t, quarter_a_lat * (t * t))
+                room = hi_n[i] - d[i] if right[k] > d[i] - hw else d[i] - lo_n[i]
+                can = min(can, max(room, 0.0) + 0.1)
+                if ds > 0 and ds < look and need > can:
+                    any_wall = True
+                    best = min(best, ds)
         g = best - 0.5 * length[i]
         if np.isfinite(g):
             out[i] = _approach(P, g, 0.0, v[i])
