@@ -44,6 +44,11 @@ Usage::
     .venv/bin/python benchmarks/bench_cosim.py --quick    # 60 s, 1 round; 8 s rings (CI)
     .venv/bin/python benchmarks/bench_cosim.py --rounds 5 --duration 120 --no-scaling
     .venv/bin/python benchmarks/bench_cosim.py --cache-probe   # rings only, ~15 s
+    .venv/bin/python benchmarks/bench_cosim.py --long-rings    # 10-50 km rings, ~2.5 min
+
+``--long-rings``: the same table for rings of 100 CAVs per km, 10, 20 and 50 km long (N =
+1 000, 2 000, 5 000): what grows with the road's length (the road profile of a long ring
+has hundreds of pieces) shows there.
 
 The scaling table ends with the line ``a + b N`` through the Python side's cost per step
 at the two smallest N: ``a`` is paid per step whatever N (what makes a small N cost more
@@ -87,6 +92,7 @@ SCALE_N = (100, 500, 1000, 2000)
 SCALE_LENGTH_M = 10000.0
 SCALE_SKIP = 20  # steps left out of the per-vehicle-step figures (start, first calls)
 PROBE_N = (100, 500)  # the rings of --cache-probe
+LONG_N = (1000, 2000, 5000)  # --long-rings: N CAVs on N / 100 km
 
 
 # ======================================================================================
@@ -106,11 +112,11 @@ def cosim_overrides(duration_s: float) -> dict:
     }
 
 
-def ring_overrides(n: int, duration_s: float) -> dict:
-    """N CAVs on a 10 km ring (placed at t = 0)."""
+def ring_overrides(n: int, duration_s: float, length_m: float = SCALE_LENGTH_M) -> dict:
+    """N CAVs on a ring of ``length_m`` (default 10 km; placed at t = 0)."""
     return {
-        "network.circumference_m": SCALE_LENGTH_M, "network.width_m": bf.WIDTH_M,
-        "demand.ring_density_vpkm": n / (SCALE_LENGTH_M / 1000.0), "demand.cav_share": 1.0,
+        "network.circumference_m": length_m, "network.width_m": bf.WIDTH_M,
+        "demand.ring_density_vpkm": n / (length_m / 1000.0), "demand.cav_share": 1.0,
         "scenario.seed": bf.SEED, "scenario.duration_s": duration_s,
         "scenario.warmup_s": 0.0, "scenario.step_length_s": bf.STEP_S,
         "scenario.lateral_resolution_m": bf.BASE_RES_M,
@@ -288,13 +294,15 @@ def print_phases(res: dict) -> None:
           f"{first:.2f} s of the {vals[3]:.2f} s of control")
 
 
-def print_scaling(scale: dict, duration_s: float) -> None:
+def print_scaling(scale: dict, duration_s: float, road: str | None = None,
+                  fit: bool = True) -> None:
     """Per vehicle-step costs of the rings, medians over rounds (us), and how flat they are
     from the smallest to the largest N (largest / smallest of the N)."""
     rounds = len(next(iter(scale.values())))
-    print(f"\nCost per vehicle-step, N CAVs on a {SCALE_LENGTH_M / 1000:g} km x {bf.WIDTH_M:g} m "
-          f"ring, {duration_s:g} s, steps {SCALE_SKIP}+, medians of {rounds} round(s) (us per "
-          "vehicle-step; Python = all phases but SUMO's step)")
+    road = road or f"a {SCALE_LENGTH_M / 1000:g} km x {bf.WIDTH_M:g} m ring"
+    print(f"\nCost per vehicle-step, N CAVs on {road}, {duration_s:g} s, steps "
+          f"{SCALE_SKIP}+, medians of {rounds} round(s) (us per vehicle-step; Python = all "
+          "phases but SUMO's step)")
     cols = ["N", "veh-steps", "SUMO", "Python", "total"] + [p for p in PHASES if p != "advance"]
     print("".join(f"{c:>10}" for c in cols))
     per_n = {}
@@ -312,6 +320,8 @@ def print_scaling(scale: dict, duration_s: float) -> None:
         xs = [v[k] for v in per_n.values()]
         print(f"{name} per vehicle-step: {min(xs):.2f}-{max(xs):.2f} us over N = "
               f"{min(per_n)}..{max(per_n)} (largest / smallest {max(xs) / min(xs):.2f})")
+    if not fit:
+        return
     small = sorted(per_n)[:2]
     fixed_us, per_veh_us = _fit_fixed({n: per_n[n] for n in small})
     print(f"Python side per step through N = {small[0]} and {small[1]}: {fixed_us:.0f} us + "
@@ -357,6 +367,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scale-duration", type=float, default=None,
                     help="horizon of the ring runs, s (default 30)")
     ap.add_argument("--no-scaling", action="store_true", help="skip the N = 100..2000 rings")
+    ap.add_argument("--long-rings", action="store_true",
+                    help="only rings of 100 CAVs per km, 10, 20 and 50 km long (N = 1 000, "
+                         "2 000, 5 000): the cost per vehicle-step as the road grows too")
     ap.add_argument("--cache-probe", action="store_true",
                     help="only the rings at N = 100 and 500, every other step without "
                          "SUMO's step: the Python side with and without SUMO's step between")
@@ -388,6 +401,15 @@ def bench(ns) -> int:
         raise ConfigError(f"--scale-duration must be at least {(SCALE_SKIP + 10) * bf.STEP_S:g}"
                           f" s, got {scale_s:g}")
     t_start = time.perf_counter()
+    if ns.long_rings:
+        long: dict[int, list[dict]] = {n: [] for n in LONG_N}
+        for r in range(rounds):
+            for n in LONG_N[r % 3:] + LONG_N[:r % 3]:
+                long[n].append(run_cosim("ring", ring_overrides(n, scale_s, n * 10.0),
+                                         skip=SCALE_SKIP))
+        print_scaling(long, scale_s, f"a ring of 100 CAVs per km, {LONG_N[0] // 100}-"
+                      f"{LONG_N[-1] // 100} km long", fit=False)
+        return 0
     if ns.cache_probe:
         probe: dict[int, list[dict]] = {n: [] for n in PROBE_N}
         for r in range(rounds):
