@@ -222,9 +222,10 @@ class SafetyLayer:
         cav_index = np.asarray(cav_index, dtype=np.int64)
         v = road.v[cav_index]
         # neighbours within a longitudinal reach
-        v_max = float(np.max(v))
+        length = _f64(road.length)
+        v_max = float(v.max())
         reach = v_max * c.tau + v_max ** 2 / (2 * c.own_decel_mps2)
-        reach += float(np.max(road.length)) + c.min_gap_m + 10.0
+        reach += float(length.max()) + c.min_gap_m + 10.0
         m = len(road.s)
         periodic = period is not None
         key = np.mod(road.s, period) if periodic else road.s
@@ -235,11 +236,9 @@ class SafetyLayer:
         is_cav = np.zeros(m, bool)
         is_cav[cav_index] = True
         has_wall = wall_gap is not None
-        from controllers.safety_kernels import apply_kernel  # numba: imported when used
-
-        v_lat_next, counts = apply_kernel(
+        v_lat_next, counts = _apply_kernel()(
             u, cav_index, _f64(v_lat), _f64(road.s), _f64(road.d), _f64(road.v),
-            _f64(road.length), _f64(road.width),
+            length, _f64(road.width),
             np.zeros(m) if road.v_lat is None else _f64(road.v_lat), is_cav, _f64(edges),
             periodic, float(period) if periodic else 0.0, order, key,
             _f64(wall_gap) if has_wall else np.zeros(0), has_wall, reach, self._scalars_of(c))
@@ -259,6 +258,19 @@ class SafetyLayer:
 
 def _f64(x) -> np.ndarray:
     return np.ascontiguousarray(x, dtype=float)
+
+
+def _apply_kernel():
+    """:func:`controllers.safety_kernels.apply_kernel` (numba: imported when first used)."""
+    global _APPLY_KERNEL
+    if _APPLY_KERNEL is None:
+        from controllers.safety_kernels import apply_kernel
+
+        _APPLY_KERNEL = apply_kernel
+    return _APPLY_KERNEL
+
+
+_APPLY_KERNEL = None
 
 
 def _scalars(c: SafetyConfig) -> np.ndarray:

@@ -217,16 +217,20 @@ class Loop:
         all_ids = state.ids
         # the observation's arrays are built here in their final form (float64, the
         # documented shapes): the constructor's checks and conversions are skipped
+        if len(others):
+            oq, op = _pair(state.s, state.d, others), _pair(state.v, state.v_lat, others)
+            ol = np.asarray(state.length[others], dtype=float)
+            ow = np.asarray(state.width[others], dtype=float)
+            oids = _objects(list(map(all_ids.__getitem__, others.tolist())))
+        else:  # nobody else: the same empty arrays every step (they hold nothing to change)
+            oq = op = _NO_PAIRS
+            ol = ow = _NO_VALUES
+            oids = _NO_IDS
         st.obs = Observation.trusted(
             q=q, p=p, t=st.t, dt=self.dt, ids=_objects(st.cav_ids), length=length,
-            width=width, others_q=_pair(state.s, state.d, others),
-            others_p=_pair(state.v, state.v_lat, others),
-            others_length=np.asarray(state.length[others], dtype=float),
-            others_width=np.asarray(state.width[others], dtype=float),
-            others_ids=_objects(list(map(all_ids.__getitem__, others.tolist()))
-                                if len(others) else []),
-            road_edges=edges, period_s=self.world.period, desired_speed=desired,
-            road=self.world.road,
+            width=width, others_q=oq, others_p=op, others_length=ol, others_width=ow,
+            others_ids=oids, road_edges=edges, period_s=self.world.period,
+            desired_speed=desired, road=self.world.road,
         )
 
     def _control(self, st: StepData) -> None:
@@ -287,6 +291,9 @@ class Loop:
 
 
 _NO_ROWS = np.zeros(0, dtype=np.intp)
+_NO_PAIRS = np.zeros((0, 2))
+_NO_VALUES = np.zeros(0)
+_NO_IDS = np.zeros(0, dtype=object)
 
 
 def _pair(a: np.ndarray, b: np.ndarray, rows: np.ndarray) -> np.ndarray:

@@ -37,6 +37,16 @@ def _stable_hash(vid) -> int:
     return zlib.crc32(str(vid).encode())
 
 
+_NO_STATIC = np.zeros(0, dtype=np.intp)  # no static vehicle (no vehicle but CAVs)
+
+
+def _c_writable(a: np.ndarray) -> np.ndarray:
+    """``a`` as a C-contiguous, writable float64 array (itself when it is one already)."""
+    if a.dtype == np.float64 and a.flags.c_contiguous and a.flags.writeable:
+        return a
+    return np.require(a, dtype=float, requirements=("C", "W"))
+
+
 @dataclass
 class _Scene:
     """All vehicles of a step in one array set: CAVs first (rows 0..N-1), then the others."""
@@ -97,6 +107,8 @@ class LaneFreeFlocking:
         self._urgent_now = np.zeros(0, bool)
         self._edges_plan = None
         self._k = 0
+        # (N, all True (N,), all False (N,)): the scene's flags when every vehicle is a CAV
+        self._flags_n: tuple = (-1, None, None)
         self.stats = {"steps": 0, "cav_steps": 0, "target_changes": 0, "yields": 0}
 
     def _kept(self, values: np.ndarray) -> dict:
@@ -164,13 +176,14 @@ class LaneFreeFlocking:
         edges, loop_edges = self._band_edges(obs, sc)
         held = self._held(obs, sc, order, periodic, period)
         # primary leader in the current band, searched as far as braking needs
-        reach = float(np.max(sc.v[:n])) ** 2 / (2 * p.comfort_decel_mps2) + 30.0
+        reach = float(sc.v[:n].max()) ** 2 / (2 * p.comfort_decel_mps2) + 30.0
         (u, u_long, hi_n, lo_n, j, ask, u_yield, n_asked, target, urgent, n_changes,
          self._edges_plan) = _kernels().law_step(
             self._pack(obs.dt), sc.s, sc.d, sc.v, sc.v_lat, sc.length, sc.width, sc.accel,
             sc.is_cav, n, order, k_side, periodic, period, target, urgent, due,
             p.lateral_mode == "fixed", edges, loop_edges, loop_edges is not None, v_des,
-            np.flatnonzero(sc.static), held, float(p.candidate_step_m), float(p.hysteresis_mps),
+            _NO_STATIC if sc.n == len(sc.s) else np.flatnonzero(sc.static), held,
+            float(p.candidate_step_m), float(p.hysteresis_mps),
             float(p.queue_hysteresis), float(p.congested_hysteresis_mps), float(p.row_pull),
             float(self.lat_max), reach)
         self.stats["target_changes"] += int(n_changes)
@@ -228,13 +241,14 @@ class LaneFreeFlocking:
         width = obs.width if obs.width is not None else np.full(n, 1.8)
         u_prev = np.where(fresh, 0.0, self._mem_u[slots])
         if not has_others:
-            static = np.zeros(n, bool)
+            if self._flags_n[0] != n:  # every vehicle a CAV, none static (read only)
+                self._flags_n = (n, np.ones(n, bool), np.zeros(n, bool))
             return _Scene(
                 s=np.ascontiguousarray(obs.q[:, 0]), d=np.ascontiguousarray(obs.q[:, 1]),
                 v=np.ascontiguousarray(obs.p[:, 0]), v_lat=np.ascontiguousarray(obs.p[:, 1]),
                 length=np.ascontiguousarray(length, dtype=float),
                 width=np.ascontiguousarray(width, dtype=float), accel=u_prev,
-                is_cav=np.ones(n, bool), static=static, n=n)
+                is_cav=self._flags_n[1], static=self._flags_n[2], n=n)
         oq, op = obs.others_q, obs.others_p
         ol, ow = obs.others_length, obs.others_width
         m_o = len(oq)
@@ -315,7 +329,9 @@ class LaneFreeFlocking:
         takes the narrower of the two and the band of lateral centres inside them."""
         p = self.params
         n = sc.n
-        if obs.road is not None:
+        if obs.road is not None and obs.road.is_constant:  # its edges everywhere
+            edges = obs.road.edges(sc.s[:n])
+        elif obs.road is not None:
             ahead = np.maximum(p.edge_lookahead_min_m, sc.v[:n] * p.edge_lookahead_s)
             edges = obs.road.narrowest(sc.s[:n], ahead)
         elif obs.road_edges is not None:
@@ -326,8 +342,8 @@ class LaneFreeFlocking:
         if obs.road_edges is not None:  # never wider than what the loop enforces
             # writable and contiguous: a read-only copy (delayed messages) would make numba
             # compile law_step once more
-            loop_edges = np.require(obs.road_edges, dtype=float, requirements=("C", "W"))
-        return np.require(edges, dtype=float, requirements=("C", "W")), loop_edges
+            loop_edges = _c_writable(obs.road_edges)
+        return _c_writable(edges), loop_edges
 
     # ------------------------------------------------------------------ longitudinal
     def _narrowing(self, obs, sc, side) -> np.ndarray:
