@@ -10,8 +10,9 @@ Each vehicle looks only at the pieces that can lie in its stretch ahead, found b
 bisection of the pieces' starts (:func:`ahead_windows`, :func:`_touching`), and tests
 those with the comparisons of the full pass over all K pieces, in the same order: the
 cost is O(N log K + the pieces in reach), not O(N K) (on a long road of many pieces, with
-N growing with the length, that was quadratic: tests/test_profile_windows.py checks the
-windows against the full pass)."""
+N growing with the length, that was quadratic; tests/test_profile_windows.py checks the
+results against the numpy references on profiles of up to 600 pieces, and that the
+windows hold every piece ahead)."""
 
 from __future__ import annotations
 

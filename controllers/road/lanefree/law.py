@@ -350,8 +350,9 @@ class LaneFreeFlocking:
         """Approach bound (N,) m/s^2 to the start of the first road piece ahead (within the
         look-ahead) whose edges exclude the CAV's body at its lateral position by more than
         it can still move sideways before it gets there; inf if none
-        (:func:`kernels.narrowing_bound`: one pass over the CAVs and the road's pieces; a
-        vehicle alongside on the side the CAV must move to blocks it now)."""
+        (:func:`kernels.narrowing_bound`: one pass over the CAVs, each testing the road's
+        pieces that start within its look-ahead; a vehicle alongside on the side the CAV
+        must move to blocks it now)."""
         p = self.params
         road = obs.road
         out, _ = _kernels().narrowing_bound(
