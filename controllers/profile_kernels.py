@@ -30,23 +30,6 @@ _MAX_WINDOWS = 8
 
 
 @njit(cache=True, inline="always")
-def _piece(s0, x):
-    """``clip(searchsorted(s0, x, 'right') - 1, 0, K - 1)``: the piece holding ``x`` (NaN
-    sorts after every value, as in numpy: the last piece)."""
-    k_last = s0.shape[0] - 1
-    if x != x:
-        return k_last
-    lo, hi = 0, s0.shape[0]  # first index with s0 > x, by bisection
-    while lo < hi:
-        mid = (lo + hi) // 2
-        if s0[mid] <= x:
-            lo = mid + 1
-        else:
-            hi = mid
-    return min(max(lo - 1, 0), k_last)
-
-
-@njit(cache=True, inline="always")
 def _first_above(s0, y):
     """First index with ``s0[i] > y`` (K if none), by bisection; ``y`` not NaN."""
     lo, hi = 0, s0.shape[0]
@@ -57,6 +40,16 @@ def _first_above(s0, y):
         else:
             hi = mid
     return lo
+
+
+@njit(cache=True, inline="always")
+def _piece(s0, x):
+    """``clip(searchsorted(s0, x, 'right') - 1, 0, K - 1)``: the piece holding ``x`` (NaN
+    sorts after every value, as in numpy: the last piece)."""
+    k_last = s0.shape[0] - 1
+    if x != x:
+        return k_last
+    return min(max(_first_above(s0, x) - 1, 0), k_last)
 
 
 @njit(cache=True)
