@@ -269,19 +269,20 @@ class Observation:
         array itself each step (:mod:`cosim.sim.loop`; tests/test_loop.py checks that it
         equals the validating constructor's result); everything else uses the
         constructor."""
+        unknown = values.keys() - _NAMES
+        if unknown:
+            raise TypeError(f"Observation has no field(s) {', '.join(sorted(unknown))}")
+        if not _REQUIRED <= values.keys():
+            missing = ", ".join(sorted(_REQUIRED - values.keys()))
+            raise TypeError(f"Observation needs the field(s) {missing}")
         obj = object.__new__(cls)
-        for f in _FIELDS:
-            if f.name in values:
-                v = values.pop(f.name)
-            elif f.default_factory is not MISSING:
-                v = f.default_factory()
-            else:
-                v = f.default
-            object.__setattr__(obj, f.name, v)
-        if values:
-            raise TypeError(f"Observation has no field(s) {', '.join(sorted(values))}")
+        state = obj.__dict__  # a frozen dataclass without slots: its fields live here
+        for name, factory in _FACTORIES:
+            state[name] = factory()
+        state.update(_DEFAULTS)
+        state.update(values)
         if obj.ids is None:
-            object.__setattr__(obj, "ids", np.arange(obj.q.shape[0]))
+            state["ids"] = np.arange(obj.q.shape[0])
         return obj
 
     @property
@@ -316,3 +317,10 @@ class Observation:
 
 
 _FIELDS = fields(Observation)
+_NAMES = frozenset(f.name for f in _FIELDS)
+_REQUIRED = frozenset(f.name for f in _FIELDS
+                      if f.default is MISSING and f.default_factory is MISSING)
+#: the fields with a default value, and those with a default factory (name, factory)
+_DEFAULTS = {f.name: f.default for f in _FIELDS if f.default is not MISSING}
+_FACTORIES = tuple((f.name, f.default_factory) for f in _FIELDS
+                   if f.default is MISSING and f.default_factory is not MISSING)

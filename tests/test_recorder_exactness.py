@@ -611,6 +611,31 @@ def test_flock_metrics_with_obstacles_and_a_leader_match_the_old_ones():
     assert _same_dict(old, new)
 
 
+def test_compiled_flock_sums_match_the_old_ones_on_hard_velocities():
+    """The compiled sums (mismatch, alignment, dispersion, deviation energy, nearest
+    distances) against the old numpy on velocities that stand still (some or all), carry
+    negative zeros or span many orders of magnitude, at N around numpy's pairwise-sum
+    blocks (128 values) and nets of hundreds of pairs."""
+    rng = np.random.default_rng(19)
+    for _ in range(300):
+        n = int(rng.choice([2, 7, 8, 9, 127, 128, 129, 257, 400]))
+        period = None if rng.random() < 0.5 else 500.0
+        q = np.column_stack([rng.uniform(0, 500, n), rng.uniform(-5, 5, n)])
+        scale = 10.0 ** rng.uniform(-8, 3, (n, 1))
+        p = np.column_stack([rng.uniform(-1, 30, n), rng.normal(0, 0.5, n)]) * scale
+        kind = rng.integers(0, 4)
+        if kind == 1:
+            p[rng.random(n) < 0.5] = 0.0
+        elif kind == 2:
+            p[:] = 0.0
+        elif kind == 3:
+            p[rng.random(n) < 0.5] = -0.0
+        d, r = float(rng.choice([1.0, 7.0])), float(rng.choice([5.0, 60.0]))
+        old = old_flock_metrics(q, p, d, r, period=period)
+        new = new_flock.flock_metrics(q, p, d, r, period=period)
+        assert _same_dict(old, new), (n, period, kind, old, new)
+
+
 # ======================================================================================
 # Whole road-world runs: new recorders against the old ones patched in
 # ======================================================================================

@@ -148,6 +148,8 @@ def flock_metrics(
     The proximity net and the nearest-neighbour distances are computed once and shared;
     in the plane of the road (m = 2, finite float64 positions) by compiled searches that
     give the same pairs, components and distances (:func:`_net_2d`)."""
+    if _compiled_ok(q) and _compiled_ok(p, finite=False):
+        return _metrics_2d(q, p, d, r, p_ref, circles, walls, period)
     if _compiled_ok(q):
         pairs, n_comp, largest, nn = _net_2d(q, r, period)
     else:
@@ -170,10 +172,40 @@ def flock_metrics(
     }
 
 
-def _compiled_ok(q) -> bool:
-    """True when :func:`_net_2d` applies: (N, 2) float64 positions, N >= 2, all finite."""
+def _compiled_ok(q, finite: bool = True) -> bool:
+    """True when :func:`_net_2d` applies: (N, 2) float64 positions, N >= 2, all finite
+    (``finite``: else any values)."""
     return (isinstance(q, np.ndarray) and q.dtype == np.float64 and q.ndim == 2
-            and q.shape[1] == 2 and len(q) >= 2 and bool(np.isfinite(q).all()))
+            and q.shape[1] == 2 and len(q) >= 2
+            and (not finite or bool(np.isfinite(q).all())))
+
+
+def _metrics_2d(q, p, d, r, p_ref, circles, walls, period) -> dict[str, float]:
+    """:func:`flock_metrics` of (N, 2) float64 positions (finite) and velocities, N >= 2:
+    :func:`_net_2d` and the sums of :func:`cosim.metrics.kernels.flock_moments`, the same
+    bits as the numpy functions above (tests/test_metrics_exactness.py)."""
+    from cosim.metrics import kernels as K  # numba: imported when first used
+
+    q, p = np.ascontiguousarray(q), np.ascontiguousarray(p)
+    pairs, n_comp, largest, nn = _net_2d(q, r, period)
+    (mismatch, u0, u1, moving, dispersion_m, energy, nn_min, nn_mean) = K.flock_moments(
+        q, p, pairs, float(d), period is not None, 0.0 if period is None else float(period),
+        nn)
+    return {
+        "min_agent_distance_m": float(nn_min),
+        "min_obstacle_distance_m": min_obstacle_distance(q, circles, walls),
+        "velocity_mismatch_m2ps2": float(mismatch),
+        "leader_velocity_mismatch_m2ps2": (
+            velocity_mismatch(p, p_ref) if p_ref is not None else np.nan
+        ),
+        "deviation_energy_m2": float(energy),
+        "avg_nn_distance_m": float(nn_mean),
+        "velocity_alignment": (float(np.linalg.norm(np.array([u0, u1]))) if moving
+                               else np.nan),
+        "dispersion_m": float(dispersion_m),
+        "n_components": n_comp,
+        "largest_component_share": largest,
+    }
 
 
 def _net_2d(q: np.ndarray, r: float, period: float | None):

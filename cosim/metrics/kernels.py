@@ -790,3 +790,79 @@ def nearest_distances(px, py, periodic, period, box_y):
                     best2 = d2
         out[order[p]] = math.sqrt(best2)
     return out
+
+
+@njit(cache=True)
+def flock_moments(q, p, pairs, d, periodic, period, nn):
+    """The flock metrics of :mod:`cosim.metrics.flock` that are sums over agents or pairs,
+    in one pass each, the same bits as its numpy functions: positions ``q`` and velocities
+    ``p`` (N, 2), N >= 2, of C order; the proximity net ``pairs`` (P, 2); the lattice
+    distance ``d`` m; nearest-neighbour distances ``nn`` (N,) m.
+
+    Returns ``(velocity_mismatch m^2/s^2, mean unit velocity x, y, moving agents,
+    dispersion m, deviation energy m^2, min nn m, mean nn m)``. numpy's reductions along
+    axis 0 of an (N, 2) array add row after row; along a row of two it adds the two; a
+    reduction of a 1-d array is :func:`np_sum`. The norm of the mean unit velocity is left
+    to numpy (``np.linalg.norm`` of a 2-vector is a BLAS dot product)."""
+    n = q.shape[0]
+    # velocity_mismatch: mean over agents of ||p_i - mean(p)||^2
+    c0 = 0.0
+    c1 = 0.0
+    for i in range(n):
+        c0 += p[i, 0]
+        c1 += p[i, 1]
+    c0 /= n
+    c1 /= n
+    buf = np.empty(max(n, pairs.shape[0]))
+    for i in range(n):
+        e0 = p[i, 0] - c0
+        e1 = p[i, 1] - c1
+        buf[i] = e0 * e0 + e1 * e1
+    mismatch = np_sum(buf, n) / n
+    # velocity_alignment: the mean of the unit velocities of the moving agents
+    u0 = 0.0
+    u1 = 0.0
+    moving = 0
+    for i in range(n):
+        speed = math.sqrt(p[i, 0] * p[i, 0] + p[i, 1] * p[i, 1])
+        if speed > 1e-12:
+            u0 += p[i, 0] / speed
+            u1 += p[i, 1] / speed
+            moving += 1
+    if moving:
+        u0 /= moving
+        u1 /= moving
+    # dispersion: sqrt of the sum of the coordinates' sample variances (ddof 1)
+    m0 = 0.0
+    m1 = 0.0
+    for i in range(n):
+        m0 += q[i, 0]
+        m1 += q[i, 1]
+    m0 /= n
+    m1 /= n
+    v0 = 0.0
+    v1 = 0.0
+    for i in range(n):
+        e0 = q[i, 0] - m0
+        e1 = q[i, 1] - m1
+        v0 += e0 * e0
+        v1 += e1 * e1
+    v0 /= n - 1
+    v1 /= n - 1
+    dispersion = math.sqrt(v0 + v1)
+    # deviation_energy: 1 / (|E| + 1) sum over directed edges of (||q_j - q_i|| - d)^2
+    n_p = pairs.shape[0]
+    energy = 0.0
+    if n_p:
+        for k in range(n_p):
+            dq0 = q[pairs[k, 1], 0] - q[pairs[k, 0], 0]
+            if periodic:
+                dq0 = (dq0 + 0.5 * period) % period - 0.5 * period
+            dq1 = q[pairs[k, 1], 1] - q[pairs[k, 0], 1]
+            dev = math.sqrt(dq0 * dq0 + dq1 * dq1) - d
+            buf[k] = dev * dev
+        energy = 2.0 * np_sum(buf, n_p) / (2 * n_p + 1)
+    nn_min = np.inf
+    for i in range(n):
+        nn_min = min(nn_min, nn[i])
+    return mismatch, u0, u1, moving, dispersion, energy, nn_min, np_sum(nn, n) / n
