@@ -93,6 +93,8 @@ SCALE_LENGTH_M = 10000.0
 SCALE_SKIP = 20  # steps left out of the per-vehicle-step figures (start, first calls)
 PROBE_N = (100, 500)  # the rings of --cache-probe
 LONG_N = (1000, 2000, 5000)  # --long-rings: N CAVs on N / 100 km
+#: The floor on the rings: name -> bench_floor variant (CAV action step one step / 1 s).
+RING_FLOORS = {"floor": "e", "floor.1s": "e.asl"}
 
 
 # ======================================================================================
@@ -123,9 +125,34 @@ def ring_overrides(n: int, duration_s: float, length_m: float = SCALE_LENGTH_M) 
     }
 
 
+def ring_floor_child(p: dict) -> dict:
+    """The floor with cosim's take-over (``bench_floor.py``'s ``e.asl``: every CAV taken
+    over with a SUMO action step of 1 s, ``setSpeed`` + ``setLateralLanePosition`` every
+    step, holding speed and lateral position) on the network and vehicles of a ring
+    scenario: the world ``cosim`` would start (:func:`cosim.sim.runner.build_world`), driven
+    by ``bench_floor.child_run`` instead of the loop. CPU s of SUMO's step and of the rest
+    from step ``skip`` on."""
+    from cosim.config.scenario import load_scenario
+    from cosim.sim.runner import build_world
+
+    sc = load_scenario(p["scenario"], p["overrides"])
+    with tempfile.TemporaryDirectory(prefix="bench_ring_floor_") as tmp:
+        world, net, _, _ = build_world(sc, Path(tmp))
+        res = bf.child_run({"mode": "run", **bf.VARIANTS[p.get("variant", "e.asl")][1],
+                            "dt": bf.STEP_S,
+                            "duration": sc.scenario.duration_s, "cmd": world.cmd,
+                            "offsets": {}, "road_length": net.length_m,
+                            "from_step": int(p["skip"])})
+    after = res["after"]
+    return {"veh_steps_after": after["veh_steps"], "sumo_s": after["T"]["step"],
+            "cpu_after_s": after["cpu_s"]}
+
+
 def child(p: dict) -> dict:
     """Run one scenario; CPU (s) in all and per phase, vehicle-steps, from step ``skip`` on
     too."""
+    if p.get("floor"):
+        return ring_floor_child(p)
     from cosim.config.scenario import load_scenario
     from cosim.sim.loop import PhaseTimer
     from cosim.sim.runner import run_scenario
@@ -211,8 +238,12 @@ def _probe(loop, timer, skip: int, out: dict) -> None:
 # ======================================================================================
 
 
-def run_cosim(scenario: str, overrides: dict, skip: int = 0, probe: bool = False) -> dict:
-    payload = {"scenario": scenario, "overrides": overrides, "skip": skip, "probe": probe}
+def run_cosim(scenario: str, overrides: dict, skip: int = 0, probe: bool = False,
+              floor: bool = False, **extra) -> dict:
+    """One child: ``run_scenario`` with the phase timers, or (``floor``) the floor on the
+    scenario's world (:func:`ring_floor_child`)."""
+    payload = {"scenario": scenario, "overrides": overrides, "skip": skip, "probe": probe,
+               "floor": floor, **extra}
     c0, w0 = bf._children_cpu(), time.perf_counter()
     env = {**os.environ, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
     proc = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--child",
@@ -295,7 +326,7 @@ def print_phases(res: dict) -> None:
 
 
 def print_scaling(scale: dict, duration_s: float, road: str | None = None,
-                  fit: bool = True) -> None:
+                  fit: bool = True, floors: dict | None = None) -> None:
     """Per vehicle-step costs of the rings, medians over rounds (us), and how flat they are
     from the smallest to the largest N (largest / smallest of the N)."""
     rounds = len(next(iter(scale.values())))
@@ -326,6 +357,32 @@ def print_scaling(scale: dict, duration_s: float, road: str | None = None,
     fixed_us, per_veh_us = _fit_fixed({n: per_n[n] for n in small})
     print(f"Python side per step through N = {small[0]} and {small[1]}: {fixed_us:.0f} us + "
           f"{per_veh_us:.2f} us x N (the fixed part: paid per step whatever N)")
+    if floors:
+        print_ring_floors(floors, per_n)
+
+
+def print_ring_floors(floors: dict, per_n: dict) -> None:
+    """The floor variants on the same rings (:func:`ring_floor_child`), us per vehicle-step
+    (medians over rounds), against cosim's total (``per_n``: N -> (SUMO, Python, total))."""
+    print("\nThe floor on the same rings (the world cosim starts, driven by bench_floor's "
+          "child; us per vehicle-step, same steps): floor = SUMO's CAV action step of one step "
+          "(the floor of the table above), floor.1s = 1 s (cosim's take-over); SUMO = its "
+          "step, calls = reading and the setters")
+    cols = ["N"] + [f"{v}:{c}" for v in floors for c in ("SUMO", "calls", "total")] + [
+        "cosim"] + [f"/ {v}" for v in floors]
+    print("".join(f"{c:>15}" for c in cols))
+    for n in per_n:
+        vals, totals = [], []
+        for runs in floors.values():
+            def us(fn, runs=runs[n]):
+                return bf._med([1e6 * fn(r) / r["veh_steps_after"] for r in runs])
+            sumo = us(lambda r: r["sumo_s"])
+            tot = us(lambda r: r["cpu_after_s"])
+            vals += [sumo, tot - sumo, tot]
+            totals.append(tot)
+        cosim = per_n[n][2]
+        print(f"{n:>15}" + "".join(f"{x:15.2f}" for x in vals) + f"{cosim:15.2f}"
+              + "".join(f"{cosim / t:15.2f}" for t in totals))
 
 
 def _fit_fixed(per_n: dict) -> tuple[float, float]:
@@ -441,11 +498,15 @@ def bench(ns) -> int:
           f"with CAVs {col}")
     if not ns.no_scaling:
         scale: dict[int, list[dict]] = {n: [] for n in SCALE_N}
+        floors = {v: {n: [] for n in SCALE_N} for v in RING_FLOORS}
         for r in range(rounds):  # interleaved too, in rotating order
             order = SCALE_N[r % len(SCALE_N):] + SCALE_N[:r % len(SCALE_N)]
             for n in order:
                 scale[n].append(run_cosim("ring", ring_overrides(n, scale_s), skip=SCALE_SKIP))
-        print_scaling(scale, scale_s)
+                for v, variant in RING_FLOORS.items():
+                    floors[v][n].append(run_cosim("ring", ring_overrides(n, scale_s),
+                                                  skip=SCALE_SKIP, floor=True, variant=variant))
+        print_scaling(scale, scale_s, floors=floors)
     print(f"\n(total benchmark wall time {time.perf_counter() - t_start:.0f} s, "
           f"load {os.getloadavg()[0]:.1f})")
     return 0

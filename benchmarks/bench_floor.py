@@ -193,10 +193,14 @@ def child_run(p: dict) -> dict:
     ls.start(p["cmd"])
     veh, sim, step = ls.vehicle, ls.simulation, ls.simulationStep
     asl = p.get("asl")  # action step (s) of the CAVs taken over (None: one step)
-    e0 = next(iter(offsets))  # a main edge: check that x = s (front) and y = d on this road
-    x0, y0 = sim.convert2D(e0, 10.0, 0)
-    if abs(x0 - (offsets[e0] + 10.0)) > 1e-6 or abs(y0) > 1e-6:
-        raise RuntimeError(f"road frame is not x = s, y = d: {x0, y0}")
+    if offsets:  # a main edge: check that x = s (front) and y = d on this road
+        e0 = next(iter(offsets))
+        x0, y0 = sim.convert2D(e0, 10.0, 0)
+        if abs(x0 - (offsets[e0] + 10.0)) > 1e-6 or abs(y0) > 1e-6:
+            raise RuntimeError(f"road frame is not x = s, y = d: {x0, y0}")
+    # from step ``from_step`` on, the times and vehicle-steps are also kept apart (after)
+    from_step = int(p.get("from_step", 0))
+    after: dict = {}
     setSpeed, setLat = veh.setSpeed, veh.setLateralLanePosition
     slowDown, setAcc, setPrev = veh.slowDown, veh.setAcceleration, veh.setPreviousSpeed
     moveTo, moveToXY = veh.moveTo, veh.moveToXY
@@ -211,6 +215,8 @@ def child_run(p: dict) -> dict:
     veh_steps = 0
     cav_steps = 0
     for k in range(n_steps):
+        if k == from_step:
+            after = {"T": dict(T), "veh_steps": veh_steps, "cpu_s": clock()}
         t0 = clock()
         step()
         if sub:
@@ -374,9 +380,15 @@ def child_run(p: dict) -> dict:
                     expect.pop(vid, None)
             calls["xy"] += n0
         T["xy"] += clock() - t7
+    c1 = clock()
     ls.close()
-    return {"cpu_s": clock() - c0, "wall_s": time.perf_counter() - w0, "T": T,
-            "calls": calls, "err": err, "veh_steps": veh_steps, "cav_steps": cav_steps}
+    out = {"cpu_s": clock() - c0, "wall_s": time.perf_counter() - w0, "T": T,
+           "calls": calls, "err": err, "veh_steps": veh_steps, "cav_steps": cav_steps}
+    if after:  # the steps from from_step on (SUMO's start and close left out)
+        out["after"] = {"T": {k: T[k] - after["T"][k] for k in T},
+                        "veh_steps": veh_steps - after["veh_steps"],
+                        "cpu_s": c1 - after["cpu_s"]}
+    return out
 
 
 _LANE_LEN: dict[str, float] = {}
