@@ -146,6 +146,15 @@ class AccelerationBox(Layer):
     def apply(self, u: np.ndarray, obs: Observation) -> np.ndarray:
         m = u.shape[1]
         lo, hi = self._bounds(m)
+        if (m == 2 and self.a_max is None and u.dtype == np.float64
+                and u.flags.c_contiguous):  # the road's commands: one compiled pass
+            from controllers.constraint_kernels import box_clip
+
+            out, changed = box_clip(u, self.long_min, self.long_max, -self.lat_max,
+                                    self.lat_max)
+            self.clipped += int(changed)
+            self.seen += u.shape[0]
+            return out
         out = np.clip(u, lo, hi)
         if self.a_max is not None:
             norm = np.linalg.norm(out, axis=1)

@@ -226,3 +226,26 @@ def test_constrained_flocking_respects_box_in_the_plane_world():
 def test_invalid_limit_raises_parameter_error_naming_it(build, name):
     with pytest.raises(ParameterError, match=name):
         build()
+
+
+def test_acceleration_box_compiled_pass_equals_numpy_clip_and_its_count():
+    """The road's (N, 2) commands take one compiled pass: the same values as ``np.clip``
+    (bounds hit exactly, infinities, negative zeros, NaN kept) and the same clip count as
+    ``out != u`` row by row."""
+    rng = np.random.default_rng(5)
+    layer = AccelerationBox()
+    lo, hi = np.array([-4.5, -1.5]), np.array([2.6, 1.5])
+    seen = clipped = 0
+    for n in (0, 1, 7, 300):
+        u = rng.normal(0.0, 4.0, (n, 2))
+        special = np.array([-4.5, 2.6, -1.5, 1.5, np.inf, -np.inf, np.nan, -0.0, 0.0])
+        mask = rng.random((n, 2)) < 0.3
+        u[mask] = rng.choice(special, int(mask.sum()))
+        want = np.clip(u, lo, hi)
+        got = layer.apply(u, obs_of(np.zeros((n, 2))))
+        np.testing.assert_array_equal(got, want)
+        np.testing.assert_array_equal(np.signbit(got), np.signbit(want))
+        seen += n
+        clipped += int(np.count_nonzero(np.any(want != u, axis=1)))
+        assert (layer.seen, layer.clipped) == (seen, clipped)
+    assert clipped > 50

@@ -380,3 +380,30 @@ def test_the_loops_observation_equals_the_validating_constructors(name):
                 assert np.array_equal(a, b), f.name
             else:
                 assert a == b or a is b, f.name
+
+
+def test_a_trusted_observation_skips_the_finite_check_only_when_its_builder_checked():
+    """``state_finite`` marks an observation whose builder (the loop's ``cav_columns``)
+    saw every entry of q and p finite; the loop passes what the kernel found, so a NaN
+    from the world still stops the law with the agent named."""
+    from controllers.observation import InvalidStateError, Observation
+    from cosim.sim.kernels import cav_columns
+
+    def columns(v):
+        s = np.array([10.0, 20.0, 30.0])
+        d, vl, ln, wd = np.zeros(3), np.zeros(3), np.full(3, 4.5), np.full(3, 1.8)
+        return cav_columns(np.arange(3, dtype=np.int64), s, d, v, vl, ln, wd,
+                           np.full(3, np.nan), 30.0, 0.1, 9.0, 5.0)
+
+    assert columns(np.array([20.0, 21.0, 22.0]))[-1] is True
+    for bad in (np.nan, np.inf):
+        q, p, *_, finite = columns(np.array([20.0, bad, 22.0]))
+        assert finite is False
+        obs = Observation.trusted(state_finite=finite, q=q, p=p, ids=np.array(["a", "b", "c"],
+                                                                              dtype=object))
+        with pytest.raises(InvalidStateError, match="'b'"):
+            obs.check_finite()
+    q = np.array([[0.0, np.nan]])
+    Observation.trusted(state_finite=True, q=q, p=np.zeros((1, 2))).check_finite()  # trusted
+    with pytest.raises(InvalidStateError):
+        Observation.trusted(q=q, p=np.zeros((1, 2))).check_finite()

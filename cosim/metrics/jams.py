@@ -83,6 +83,9 @@ class JamRecorder:
         self._win_start: float | None = None
         self._win_crossed = np.zeros(len(self.xs), dtype=bool)
         self._win_waiting = np.ones(len(self.xs), dtype=bool)
+        #: a cross-section not yet passed or a vehicle waiting at one in this window
+        #: (``not crossed.all() or waiting.any()``): the window test has work to do
+        self._win_open = True
         self.blocked_windows = 0
         self.blocked_log: list[dict] = []
 
@@ -101,7 +104,7 @@ class JamRecorder:
         idx = align(self._ids, ids) if prev_rows is UNALIGNED else prev_rows
         is_static = np.asarray(is_static, dtype=bool)
         s_front = np.asarray(s_front, dtype=float)
-        t0, long_now, stopped, front_prev, longest, new_long = K.jam_step(
+        t0, long_now, front_now, stopped, front_prev, longest, new_long = K.jam_step(
             float(t), np.asarray(v, dtype=float), is_static, s_front,
             _NO_ROWS if idx is None else idx, idx is None, self._t0, self._long, self._front,
             float(self.v_stop), float(self.long_s))
@@ -113,18 +116,19 @@ class JamRecorder:
         self._ids = ids
         self._t0 = t0
         self._long = long_now
-        self._front = np.append(s_front, np.nan)
+        self._front = front_now
 
     def _windows(self, t, s_front, stopped, is_static, prev) -> None:
         if not len(self.xs) or t <= self.warmup_s + 1e-9:
             return
         if self._win_start is None:
             self._win_start = self.warmup_s
-        if not self._win_crossed.all() or self._win_waiting.any():
+        if self._win_open:
             K.jam_windows(s_front, stopped, is_static, prev, self.xs, ~self._win_crossed,
                           self._win_waiting.copy(), self.period is not None,
                           0.0 if self.period is None else float(self.period), UPSTREAM_M,
                           self._win_crossed, self._win_waiting)
+            self._win_open = not self._win_crossed.all() or self._win_waiting.any()
         if t >= self._win_start + self.long_s - 1e-9:
             blocked = ~self._win_crossed & self._win_waiting
             for k in np.flatnonzero(blocked):
@@ -134,6 +138,7 @@ class JamRecorder:
             self._win_start = t
             self._win_crossed[:] = False
             self._win_waiting[:] = True
+            self._win_open = True
 
     def summary(self) -> dict:
         """The run's jam figures (units in the names)."""

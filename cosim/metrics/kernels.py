@@ -601,13 +601,16 @@ def jam_step(t, v, is_static, s_front, prev_row, same_rows, t0_old, long_old, fr
     last row (NaN, False, NaN) that new vehicles read; the standstill speed ``v_stop``
     m/s and the long-standstill threshold ``long_s`` s.
 
-    Returns ``(t0, long_now, stopped, front_prev, longest, new_long)``: the standstill
-    starts and long flags (M + 1,), the standstill mask (M,), the fronts a step ago (M,)
-    m, the longest standstill now (s; -inf if nobody stands still) and the rows whose
-    standstill became long in this step.
+    Returns ``(t0, long_now, front_now, stopped, front_prev, longest, new_long)``: the
+    standstill starts, long flags and fronts (M + 1,) with the sentinel row (what the next
+    step reads), the standstill mask (M,), the fronts a step ago (M,) m, the longest
+    standstill now (s; -inf if nobody stands still) and the rows whose standstill became
+    long in this step.
     """
     n = v.shape[0]
     t0 = np.full(n + 1, np.nan)
+    front_now = np.empty(n + 1)
+    front_now[n] = np.nan
     long_now = np.zeros(n + 1, np.bool_)
     stopped = np.zeros(n, np.bool_)
     front_prev = np.empty(n)
@@ -619,6 +622,7 @@ def jam_step(t, v, is_static, s_front, prev_row, same_rows, t0_old, long_old, fr
         if j < 0:
             j = t0_old.shape[0] - 1  # the sentinel row
         front_prev[i] = front_old[j]
+        front_now[i] = s_front[i]
         if v[i] < v_stop and not is_static[i]:
             stopped[i] = True
             began = t0_old[j]
@@ -635,7 +639,7 @@ def jam_step(t, v, is_static, s_front, prev_row, same_rows, t0_old, long_old, fr
                     n_new += 1
             elif long_old[j]:
                 long_now[i] = True
-    return t0, long_now, stopped, front_prev, longest, new_long[:n_new].copy()
+    return t0, long_now, front_now, stopped, front_prev, longest, new_long[:n_new].copy()
 
 
 @njit(cache=True)

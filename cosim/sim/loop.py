@@ -37,7 +37,7 @@ from controllers.observation import Observation
 from controllers.profile_kernels import first_wall_ahead
 from controllers.safety import RoadState, SafetyLayer
 from cosim.errors import CosimError
-from cosim.sim.kernels import cav_columns
+from cosim.sim.kernels import cav_columns, integrate
 from cosim.sim.world import RoadSnapshot, World
 
 PHASES = ("advance", "observe", "reference", "control", "constrain", "safety", "integrate",
@@ -209,7 +209,7 @@ class Loop:
         others = (_NO_ROWS if len(rows) == state.n  # every vehicle is a controlled CAV
                   else np.flatnonzero(~st.controlled & np.isfinite(state.s)))
         b = self.limits.emergency_decel_mps2
-        q, p, desired, stop, length, width = cav_columns(
+        q, p, desired, stop, length, width, finite = cav_columns(
             np.asarray(rows, dtype=np.int64), *_f64(state.s, state.d, state.v, state.v_lat,
                                                       state.length, state.width, state.desired),
             float(self.world.speed_limit_mps), self.dt, 2 * b, EDGE_MARGIN_AHEAD_M)
@@ -227,6 +227,7 @@ class Loop:
             ol = ow = _NO_VALUES
             oids = _NO_IDS
         st.obs = Observation.trusted(
+            state_finite=bool(finite),
             q=q, p=p, t=st.t, dt=self.dt, ids=_objects(st.cav_ids), length=length,
             width=width, others_q=oq, others_p=op, others_length=ol, others_width=ow,
             others_ids=oids, road_edges=edges, period_s=self.world.period,
@@ -283,8 +284,10 @@ class Loop:
 
     def _integrate(self, st: StepData) -> None:
         obs = st.obs
-        st.v_next = np.clip(obs.p[:, 0] + st.u[:, 0] * self.dt, 0.0, self.world.speed_limit_mps)
-        st.d_next = obs.q[:, 1] + st.v_lat_next * self.dt
+        st.v_next, st.d_next = integrate(
+            obs.q, obs.p, np.ascontiguousarray(st.u, dtype=float),
+            np.ascontiguousarray(st.v_lat_next, dtype=float), self.dt,
+            float(self.world.speed_limit_mps))
 
     def _apply(self, st: StepData) -> None:
         self.world.apply(st.cav_ids, st.v_next, st.d_next, st.v_lat_next, rows=st.cav_rows)

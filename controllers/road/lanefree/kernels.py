@@ -698,3 +698,42 @@ def narrowing_bound(P, s, d, v, width, length, n, s0, right, left, periodic, per
         if np.isfinite(g):
             out[i] = _approach(P, g, 0.0, v[i])
     return out, any_wall
+
+
+# ------------------------------------------------------------------ the law's memory
+@njit(cache=True)
+def recall(fresh, slots, mem_target, mem_urgent, mem_phase, mem_u, phase_now):
+    """What the law remembers of its N CAVs (memory slots ``slots``; ``fresh``: no memory):
+    lateral targets (NaN: none), announced moves, whether each re-chooses its target this
+    step (no target, or its staggered phase is ``phase_now``) and the last longitudinal
+    command (0 m/s^2 when fresh): ``(target, urgent, due, u_prev)`` (N,), as
+    ``np.where``/``&``/``isnan``/``==`` gave them."""
+    n = slots.shape[0]
+    target = np.empty(n)
+    urgent = np.empty(n, np.bool_)
+    due = np.empty(n, np.bool_)
+    u_prev = np.empty(n)
+    for i in range(n):
+        k = slots[i]
+        if fresh[i]:
+            target[i] = np.nan
+            urgent[i] = False
+            u_prev[i] = 0.0
+        else:
+            target[i] = mem_target[k]
+            urgent[i] = mem_urgent[k]
+            u_prev[i] = mem_u[k]
+        due[i] = np.isnan(target[i]) or mem_phase[k] == phase_now
+    return target, urgent, due, u_prev
+
+
+@njit(cache=True)
+def remember(slots, target, urgent, u, calls, mem_target, mem_urgent, mem_u, mem_last):
+    """Store the step's lateral targets, announced moves and longitudinal commands
+    (``u[:, 0]``) in the CAVs' memory slots, marked with the call ``calls``."""
+    for i in range(slots.shape[0]):
+        k = slots[i]
+        mem_target[k] = target[i]
+        mem_urgent[k] = urgent[i]
+        mem_u[k] = u[i, 0]
+        mem_last[k] = calls

@@ -109,6 +109,7 @@ class LaneFreeFlocking:
         self._k = 0
         # (N, all True (N,), all False (N,)): the scene's flags when every vehicle is a CAV
         self._flags_n: tuple = (-1, None, None)
+        self._none_fresh_n: tuple = (-1, None)  # (N, all False (N,)): see _none_fresh
         self.stats = {"steps": 0, "cav_steps": 0, "target_changes": 0, "yields": 0}
 
     def _kept(self, values: np.ndarray) -> dict:
@@ -157,7 +158,16 @@ class LaneFreeFlocking:
         p = self.params
         ids = obs.ids.tolist()
         slots, fresh = self._slots(ids)
-        sc = self._scene(obs, slots, fresh)
+        # memory: lateral targets (re-chosen every replan_s, staggered by id), announced
+        # moves and the last longitudinal commands
+        every = max(1, int(round(p.replan_s / obs.dt)))
+        if fresh.any():
+            self._mem_phase[slots[fresh]] = [_stable_hash(ids[r]) % every
+                                             for r in np.flatnonzero(fresh)]
+        target, urgent, due, u_prev = _kernels().recall(
+            fresh, slots, self._mem_target, self._mem_urgent, self._mem_phase, self._mem_u,
+            self._k % every)
+        sc = self._scene(obs, u_prev)
         m = len(sc.s)
         periodic = obs.period_s is not None
         period = float(obs.period_s) if periodic else 0.0
@@ -165,14 +175,6 @@ class LaneFreeFlocking:
         k_side = min(p.window, max((m - 1) // 2, 1)) if periodic else p.window
         v_des = np.ascontiguousarray(obs.desired_speed, dtype=float) \
             if obs.desired_speed is not None else np.full(n, 30.0)
-        # memory: lateral targets (re-chosen every replan_s, staggered by id) and moves
-        every = max(1, int(round(p.replan_s / obs.dt)))
-        target = np.where(fresh, np.nan, self._mem_target[slots])
-        urgent = ~fresh & self._mem_urgent[slots]
-        if fresh.any():
-            self._mem_phase[slots[fresh]] = [_stable_hash(ids[r]) % every
-                                             for r in np.flatnonzero(fresh)]
-        due = np.isnan(target) | (self._mem_phase[slots] == self._k % every)
         edges, loop_edges = self._band_edges(obs, sc)
         held = self._held(obs, sc, order, periodic, period)
         # primary leader in the current band, searched as far as braking needs
@@ -213,7 +215,7 @@ class LaneFreeFlocking:
         """Memory slots (N,) of the CAVs and which of them start afresh (N,) (absent in the
         previous step: no memory, as when it was pruned)."""
         if ids == self._last_ids:  # the same CAVs as in the last step: none afresh
-            return self._last_slots, np.zeros(len(ids), bool)
+            return self._last_slots, self._none_fresh(len(ids))
         found = list(map(self._slot.get, ids))
         if None in found:
             for r in [r for r, k in enumerate(found) if k is None]:
@@ -234,12 +236,21 @@ class LaneFreeFlocking:
         self._last_ids, self._last_slots = ids, slots
         return slots, fresh
 
-    def _scene(self, obs: Observation, slots: np.ndarray, fresh: np.ndarray) -> _Scene:
+    def _none_fresh(self, n: int) -> np.ndarray:
+        """(n,) all False (read only, kept per n): no CAV starts afresh."""
+        if self._none_fresh_n[0] != n:
+            flags = np.zeros(n, bool)
+            flags.flags.writeable = False
+            self._none_fresh_n = (n, flags)
+        return self._none_fresh_n[1]
+
+    def _scene(self, obs: Observation, u_prev: np.ndarray) -> _Scene:
+        """The vehicles the law sees, CAVs first; ``u_prev``: the CAVs' last longitudinal
+        commands (N,), m/s^2."""
         n = obs.n
         has_others = obs.others_q is not None and len(obs.others_q) > 0
         length = obs.length if obs.length is not None else np.full(n, 4.5)
         width = obs.width if obs.width is not None else np.full(n, 1.8)
-        u_prev = np.where(fresh, 0.0, self._mem_u[slots])
         if not has_others:
             if self._flags_n[0] != n:  # every vehicle a CAV, none static (read only)
                 self._flags_n = (n, np.ones(n, bool), np.zeros(n, bool))
@@ -454,10 +465,8 @@ class LaneFreeFlocking:
 
     # ------------------------------------------------------------------ memory
     def _remember(self, obs, sc, slots, targets, urgent, u) -> None:
-        self._mem_target[slots] = targets
-        self._mem_urgent[slots] = urgent
-        self._mem_u[slots] = u[:, 0]
-        self._mem_last[slots] = self._calls
+        _kernels().remember(slots, targets, urgent, u, self._calls, self._mem_target,
+                            self._mem_urgent, self._mem_u, self._mem_last)
         self._calls += 1
         if obs.others_ids is not None and sc.n < len(sc.s):
             oids = obs.others_ids.tolist()
