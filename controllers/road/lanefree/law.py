@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 import zlib
+from collections import deque
 from dataclasses import dataclass
 from itertools import compress, repeat
 
@@ -104,6 +105,9 @@ class LaneFreeFlocking:
         self._d_prev: dict = {}  # other id -> last lateral position, m
         self._moved: set = set()  # others seen moving (a stopped obstacle never is)
         self._yield_since: dict = {}  # (CAV id, vehicle id) -> time the yield began, s
+        #: (time, pair) of every value written into _yield_since, oldest first, the entries
+        #: still within the timeout (see _patience)
+        self._yield_recent: deque = deque()
         self._urgent_now = np.zeros(0, bool)
         self._edges_plan = None
         self._k = 0
@@ -406,17 +410,28 @@ class LaneFreeFlocking:
         keys = list(zip(map(ids_all.__getitem__, rows.tolist()),
                         map(ids_all.__getitem__, j[rows, cols].tolist()), strict=True))
         seen = set(keys)
-        since = self._yield_since
+        since, recent = self._yield_since, self._yield_recent
         timeout, renew = p.yield_timeout_s, p.yield_timeout_s + p.yield_cooldown_s
         for k, key in enumerate(keys):
-            waited = t - since.setdefault(key, t)
+            t0 = since.get(key)
+            if t0 is None:
+                since[key] = t0 = t
+                recent.append((t, key))
+            waited = t - t0
             if waited > timeout:
                 keep[rows[k], cols[k]] = False
                 if waited > renew:
                     since[key] = t  # patience again
-        for key in [k for k, t0 in self._yield_since.items()
-                    if k not in seen and t - t0 <= p.yield_timeout_s]:
-            del self._yield_since[key]  # the pair ended before the timeout
+                    recent.append((t, key))
+        # a pair that ended before the timeout is forgotten. Only values written within
+        # the timeout can be such: ``recent`` holds them in time order (``t - t0`` only
+        # grows towards its front), so the scan stops at the first older one; a pair kept
+        # past its timeout stays (its cooldown), as before, at no cost per step
+        while recent and t - recent[0][0] > timeout:
+            recent.popleft()
+        for t0, key in recent:
+            if key not in seen and since.get(key) == t0:
+                del since[key]
         return keep
 
     def _held(self, obs, sc, order, periodic, period) -> np.ndarray:
