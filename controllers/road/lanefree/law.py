@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import functools
 import zlib
-from collections import deque
 from dataclasses import dataclass
 from itertools import compress, repeat
 
@@ -105,9 +104,7 @@ class LaneFreeFlocking:
         self._d_prev: dict = {}  # other id -> last lateral position, m
         self._moved: set = set()  # others seen moving (a stopped obstacle never is)
         self._yield_since: dict = {}  # (CAV id, vehicle id) -> time the yield began, s
-        #: (time, pair) of every value written into _yield_since, oldest first, the entries
-        #: still within the timeout (see _patience)
-        self._yield_recent: deque = deque()
+        self._yield_asked: set = set()  # the pairs of the last call of _patience
         self._urgent_now = np.zeros(0, bool)
         self._edges_plan = None
         self._k = 0
@@ -410,28 +407,23 @@ class LaneFreeFlocking:
         keys = list(zip(map(ids_all.__getitem__, rows.tolist()),
                         map(ids_all.__getitem__, j[rows, cols].tolist()), strict=True))
         seen = set(keys)
-        since, recent = self._yield_since, self._yield_recent
+        since = self._yield_since
         timeout, renew = p.yield_timeout_s, p.yield_timeout_s + p.yield_cooldown_s
         for k, key in enumerate(keys):
-            t0 = since.get(key)
-            if t0 is None:
-                since[key] = t0 = t
-                recent.append((t, key))
-            waited = t - t0
+            waited = t - since.setdefault(key, t)
             if waited > timeout:
                 keep[rows[k], cols[k]] = False
                 if waited > renew:
                     since[key] = t  # patience again
-                    recent.append((t, key))
-        # a pair that ended before the timeout is forgotten. Only values written within
-        # the timeout can be such: ``recent`` holds them in time order (``t - t0`` only
-        # grows towards its front), so the scan stops at the first older one; a pair kept
-        # past its timeout stays (its cooldown), as before, at no cost per step
-        while recent and t - recent[0][0] > timeout:
-            recent.popleft()
-        for t0, key in recent:
-            if key not in seen and since.get(key) == t0:
+        # a pair that ended before its timeout is forgotten; one kept past it stays (its
+        # cooldown). Only the pairs of the last call can have just ended: every other pair
+        # in memory was asked in neither call, and at the call where it ended it was either
+        # forgotten or past its timeout, which it stays (not a scan of the whole memory,
+        # which grew with the run's length)
+        for key in self._yield_asked - seen:
+            if t - since[key] <= timeout:
                 del since[key]
+        self._yield_asked = seen
         return keep
 
     def _held(self, obs, sc, order, periodic, period) -> np.ndarray:
