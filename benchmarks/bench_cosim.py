@@ -36,7 +36,11 @@ Then the cost per vehicle-step with N = 100, 500, 1 000, 2 000 vehicles on a 10 
 ring (100 % CAVs placed at t = 0: N stays fixed), after ``SCALE_SKIP`` steps, in as many
 interleaved rounds as the main case (medians): SUMO's step, the Python side (every other
 phase) and each phase, us per vehicle-step, and how flat each is over N (largest /
-smallest).
+smallest). Beside it the floor on the same rings (:func:`ring_floor_child`: the world
+``cosim`` starts, driven by ``bench_floor.py``'s child instead of the loop, with the CAVs'
+SUMO action step of one step, ``floor``, and of 1 s, ``floor.1s``, the take-over ``cosim``
+uses here): what the least controller of this kind costs per vehicle-step at each N, an
+expectation for how flat a co-simulation can be, and cosim's total against it.
 
 Usage::
 
