@@ -796,6 +796,18 @@ def nearest_distances(px, py, periodic, period, box_y):
     return out
 
 
+@njit(cache=True, inline="always")
+def _column_means(a):
+    """``a.mean(axis=0)`` of an (N, 2) array, N >= 1: numpy adds row after row."""
+    n = a.shape[0]
+    m0 = 0.0
+    m1 = 0.0
+    for i in range(n):
+        m0 += a[i, 0]
+        m1 += a[i, 1]
+    return m0 / n, m1 / n
+
+
 @njit(cache=True)
 def flock_moments(q, p, pairs, d, periodic, period, nn):
     """The flock metrics of :mod:`cosim.metrics.flock` that are sums over agents or pairs,
@@ -810,13 +822,7 @@ def flock_moments(q, p, pairs, d, periodic, period, nn):
     to numpy (``np.linalg.norm`` of a 2-vector is a BLAS dot product)."""
     n = q.shape[0]
     # velocity_mismatch: mean over agents of ||p_i - mean(p)||^2
-    c0 = 0.0
-    c1 = 0.0
-    for i in range(n):
-        c0 += p[i, 0]
-        c1 += p[i, 1]
-    c0 /= n
-    c1 /= n
+    c0, c1 = _column_means(p)
     buf = np.empty(max(n, pairs.shape[0]))
     for i in range(n):
         e0 = p[i, 0] - c0
@@ -837,13 +843,7 @@ def flock_moments(q, p, pairs, d, periodic, period, nn):
         u0 /= moving
         u1 /= moving
     # dispersion: sqrt of the sum of the coordinates' sample variances (ddof 1)
-    m0 = 0.0
-    m1 = 0.0
-    for i in range(n):
-        m0 += q[i, 0]
-        m1 += q[i, 1]
-    m0 /= n
-    m1 /= n
+    m0, m1 = _column_means(q)
     v0 = 0.0
     v1 = 0.0
     for i in range(n):
