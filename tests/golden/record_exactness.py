@@ -30,7 +30,9 @@ for the prefix-stable demand and calibrated human drivers, and for the zipper an
 held-driver rules of the lane-free law and the safety layer's in-band rule; everything
 recorded again for the lane-free law's congestion rules (hysteresis, announced moves and
 rows in dense traffic); runs recorded again when CAVs straddling a joint started to move
-sideways with changeSublane (cosim/sumo/world.py).
+sideways with changeSublane (cosim/sumo/world.py); the obstacle law case's commands (not
+its stored observations) replayed again when a CAV behind a stopped car stopped being
+pushed towards it and CAVs gave held-up drivers SUMO's gap behind them (user-drawn roads).
 """
 
 from __future__ import annotations
@@ -108,8 +110,9 @@ def capture_law(name: str) -> dict:
     from cosim.sim.runner import run_scenario
 
     scen, ov, k0, n = LAW_CASES[name]
-    sc = load_scenario(scen, {**ov, "scenario.duration_s": (k0 + n) * 0.1 + 1e-6,
-                              "scenario.warmup_s": 0.0})
+    dur = (k0 + n) * 0.1 + 1e-6  # one measurement interval: the run (nothing read of it)
+    sc = load_scenario(scen, {**ov, "scenario.duration_s": dur, "scenario.warmup_s": 0.0,
+                              "scenario.interval_s": dur})
     steps: list[dict] = []
 
     def hooks(loop):
@@ -150,7 +153,8 @@ def capture_traj(name: str) -> dict:
     from cosim.sim.runner import run_scenario
 
     scen, ov, dur = {**TRAJ_CASES, **ACTION_STEP_CASES}[name]
-    sc = load_scenario(scen, {**ov, "scenario.duration_s": dur, "scenario.warmup_s": 0.0})
+    sc = load_scenario(scen, {**ov, "scenario.duration_s": dur, "scenario.warmup_s": 0.0,
+                              "scenario.interval_s": dur})
     states, cmds = [], []
 
     def hooks(loop):
