@@ -7,7 +7,7 @@ DEV     := $(VENV)/.installed-dev
 # Test processes in parallel (pytest-xdist); `make test JOBS=1` runs them one by one.
 JOBS   ?= 2
 
-.PHONY: run test test-fast lint bench clean install install-dev warm
+.PHONY: run test test-long test-fast lint bench clean install install-dev warm
 
 $(VENV)/bin/python:
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found (set PYTHON=...)"; exit 1; }
@@ -41,9 +41,13 @@ test: $(DEV)
 	$(VENV)/bin/ruff check .
 	$(PY) -m pytest -q -n $(JOBS)
 
+# The long checks (marked `long`: whole families of runs, minutes each), after `make test`.
+test-long: $(DEV)
+	$(PY) -m pytest -q -n $(JOBS) -m long
+
 # The unit tests only (no SUMO), about a minute.
 test-fast: $(DEV)
-	$(PY) -m pytest -q -n $(JOBS) -m "not sumo"
+	$(PY) -m pytest -q -n $(JOBS) -m "not sumo and not long"
 
 lint: $(DEV)
 	$(VENV)/bin/ruff check .

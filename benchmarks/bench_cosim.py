@@ -113,6 +113,7 @@ def cosim_overrides(duration_s: float) -> dict:
         "demand.inflow_vph": bf.INFLOW_VPH, "demand.cav_share": 1.0,
         "scenario.seed": bf.SEED, "scenario.duration_s": duration_s,
         "scenario.warmup_s": min(60.0, 0.5 * duration_s),
+        "scenario.interval_s": min(60.0, 0.5 * duration_s),
         "scenario.step_length_s": bf.STEP_S, "scenario.lateral_resolution_m": bf.BASE_RES_M,
         "outputs.sumo_collisions": True,
     }
@@ -124,8 +125,8 @@ def ring_overrides(n: int, duration_s: float, length_m: float = SCALE_LENGTH_M) 
         "network.circumference_m": length_m, "network.width_m": bf.WIDTH_M,
         "demand.ring_density_vpkm": n / (length_m / 1000.0), "demand.cav_share": 1.0,
         "scenario.seed": bf.SEED, "scenario.duration_s": duration_s,
-        "scenario.warmup_s": 0.0, "scenario.step_length_s": bf.STEP_S,
-        "scenario.lateral_resolution_m": bf.BASE_RES_M,
+        "scenario.warmup_s": 0.0, "scenario.interval_s": min(60.0, duration_s),
+        "scenario.step_length_s": bf.STEP_S, "scenario.lateral_resolution_m": bf.BASE_RES_M,
     }
 
 

@@ -91,6 +91,9 @@ WIDTH_DROP = [[360.0, 10.2], [10.0, 9.78], [10.0, 9.35], [10.0, 8.92], [10.0, 8.
 #: stopped car whose body reaches 0.5 m into its sublanes never moves out (seed 2: 224 s);
 #: at 0.4 m it does (7 s). CAVs do not depend on it (they set their position).
 OBSTACLE_LATERAL_RESOLUTION_M = 0.4
+#: SUMO's sublane width of the width-drop and on-ramp arms, m: the one their human drivers
+#: were calibrated and these checks first run at ("auto" would take 0.2 m on both roads)
+CALIBRATED_LATERAL_RESOLUTION_M = 0.8
 RAMP_QUEUE_MAX = 20  # vehicles waiting to enter at the end of the run
 LATERAL_DENSITIES_VPKM = (40.0, 120.0, 225.0)
 
@@ -124,14 +127,16 @@ def arms() -> dict[str, dict]:
         out[f"obstacle/cav{pct}"] = o
     for pct in (100, 60, 0):
         o = _open(700.0, 8000.0, pct / 100.0, (420.0, 690.0), [200.0, NECK_SECTION_M])
-        o.update({"network.kind": "varying_width", "network.width_profile": WIDTH_DROP})
+        o.update({"network.kind": "varying_width", "network.width_profile": WIDTH_DROP,
+                  "scenario.lateral_resolution_m": CALIBRATED_LATERAL_RESOLUTION_M})
         if pct == 0:
             o["controller.kind"] = "sumo"
         out[f"width_drop/cav{pct}"] = o
     for pct in (100, 50, 0):
         o = _open(1500.0, 3000.0, pct / 100.0, (600.0, 1400.0), [400.0, 700.0])
         o.update({"network.kind": "onramp", "network.merge_position_m": 500.0,
-                  "demand.ramp_inflow_vph": 1500.0})
+                  "demand.ramp_inflow_vph": 1500.0,
+                  "scenario.lateral_resolution_m": CALIBRATED_LATERAL_RESOLUTION_M})
         if pct == 0:
             o["controller.kind"] = "sumo"
         out[f"onramp/cav{pct}"] = o

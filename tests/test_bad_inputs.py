@@ -46,7 +46,8 @@ EXAMPLES = REPO / "networks" / "examples"
 SHORT = ("[scenario]\nduration_s = 10.0\nwarmup_s = 2.0\ninterval_s = 4.0\n"
          "[network]\nlength_m = 300.0\n")
 #: A valid sweep (refused only for what a case adds).
-SWEEP = "seeds = [1]\n[sweep]\nname = \"bad\"\n[overrides]\n\"scenario.duration_s\" = 10.0\n"
+SWEEP = ("seeds = [1]\n[sweep]\nname = \"bad\"\n[overrides]\n\"scenario.duration_s\" = 10.0\n"
+         "\"scenario.warmup_s\" = 2.0\n\"scenario.interval_s\" = 4.0\n")
 
 
 @dataclass(frozen=True)
@@ -360,7 +361,7 @@ GEOMETRY = [
          files=run_short()[1], says="circumference_m"),
     case("ring_denser_than_it_holds", "run", "ring", "--quiet",
          "--set", "demand.ring_density_vpkm=1000.0", "--duration", "10", "--warmup", "2",
-         says="at most"),
+         "--set", "scenario.interval_s=4", says="at most"),
     case("merge_beyond_the_road",
          *run_short("--set", "network.kind='onramp'", "--set", "network.merge_position_m=900.0")[0],
          files=run_short()[1], says="merge_position_m"),
@@ -403,6 +404,15 @@ TIME = [
          files=run_short()[1], says="steps"),
     case("zero_duration", *run_short("--duration", "0")[0], files=run_short()[1],
          says="duration_s"),
+    case("warmup_as_long_as_the_run", *run_short("--warmup", "10")[0], files=run_short()[1],
+         says=("warmup_s", "nothing would be measured")),
+    case("warmup_longer_than_the_run", *run_short("--duration", "5")[0],
+         files=run_short()[1], says=("warmup_s", "nothing would be measured")),
+    case("interval_longer_than_what_is_left",
+         *run_short("--set", "scenario.interval_s=9.0")[0], files=run_short()[1],
+         says=("interval", "nothing would be measured")),
+    case("sublane_width_a_word", *run_short("--set", "scenario.lateral_resolution_m='fine'")[0],
+         files=run_short()[1], says=("lateral_resolution_m", "auto")),
     case("interval_shorter_than_a_step", *run_short("--set", "scenario.interval_s=0.01")[0],
          files=run_short()[1], says="interval_s"),
     case("cav_action_step_shorter_than_a_step",

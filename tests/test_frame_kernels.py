@@ -85,15 +85,16 @@ def test_compiled_frame_is_numpys_bit_for_bit(networks, name, case):
             assert _same(got, want), (name, case, n)
 
 
-def test_kinks_take_the_projection_and_round_trip(networks):
-    """The multi-edge road's junction lanes are not parallel to the line (so the test
-    above exercises the projection there), and the public methods, which run compiled,
-    still invert each other (to 1e-3 m: in the outer corner of a smoothed kink the two
-    directions pick neighbouring segments, tests/test_road_frame.py)."""
-    net = networks["multi_edge"]
+def test_ramp_lanes_take_the_projection_and_round_trip(networks):
+    """The main route's lanes are all in SUMO's lane coordinates (the parallel path), the
+    on-ramp's lanes are not (so the test above exercises the projection there), and the
+    public methods, which run compiled, still invert each other."""
+    for name in ("curve", "multi_edge", "width_change", "ring"):
+        assert networks[name].tables.par.all(), name
+    net = networks["onramp"]
     assert not net.tables.par.all()
     rng = np.random.default_rng(3)
-    k, pos, lat = _inputs(net, rng, 500, off_route=0.0, beyond=0.0)
+    k, pos, lat = _inputs(net, rng, 500, off_route=0.0, beyond=0.0, only=~net.tables.par)
     s, d = net.lane_frame(None, pos, lat, keys=k)
     back = net.lateral_lane_position(None, pos, d, keys=k)
     np.testing.assert_allclose(back, lat, atol=1e-3)

@@ -205,6 +205,7 @@ def _screenshot_case(out: Path) -> dict:
     from cosim.road.build import build_network
     from cosim.sumo.binaries import sumo_binary
     from cosim.sumo.gui import DEFAULT_VIEW, screenshot, start_gui
+    from cosim.sumo.sublanes import scenario_resolution_m
 
     sc = load_scenario("default")  # what `cosim run default` runs
     run = sc.scenario
@@ -214,7 +215,7 @@ def _screenshot_case(out: Path) -> dict:
     ts = start_gui([
         str(sumo_binary("sumo-gui")), "-n", str(net.net_file), "-r", str(routes.path),
         "--step-length", str(run.step_length_s), "--seed", str(run.seed),
-        "--lateral-resolution", str(run.lateral_resolution_m),
+        "--lateral-resolution", f"{scenario_resolution_m(sc, net):g}",
         "--begin", "0", "--end", str(duration_s), "--collision.action", "none",
         "--no-step-log", "true", "--no-warnings", "true", "--window-size", "1280,800",
     ])

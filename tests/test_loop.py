@@ -364,7 +364,7 @@ def test_the_loops_observation_equals_the_validating_constructors(name):
 
     seen: list = []
     over = {"scenario.world": "road", "scenario.duration_s": 20.0, "scenario.warmup_s": 1.0,
-            "demand.cav_share": 0.7}
+            "scenario.interval_s": 10.0, "demand.cav_share": 0.7}
 
     def hooks(loop):
         loop.hooks.add("reference", lambda st: seen.append(st.obs))

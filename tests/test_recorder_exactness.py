@@ -72,7 +72,8 @@ class OldJamRecorder:
         self.blocked_log: list[dict] = []
 
     def record(self, t: float, ids: list, s_front: np.ndarray, v: np.ndarray,
-               is_static: np.ndarray, prev_rows=None) -> None:  # prev_rows: ignored
+               is_static: np.ndarray, prev_rows=None,
+               is_cav=None) -> None:  # prev_rows, is_cav: ignored (no split by kind)
         """One step: ids (M,), front positions (M,) m, speeds (M,) m/s, obstacle mask (M,)."""
         moving_ids = set()
         stopped = (v < self.v_stop) & ~is_static
@@ -677,8 +678,12 @@ def test_road_world_run_matches_the_old_recorders(case, monkeypatch):
         m.setattr(recording, "step_state", old_step_state)
         m.setattr(recording, "_flock_sample", old_flock_sample)
         old = _road_run(name, over)
+    # the standstills by kind are new (the old recorder had only the longest of all)
+    kinds = ["max_standstill_cav_s", "max_standstill_hdv_s"]
+    row = new.summary.iloc[0]
+    assert row["max_standstill_s"] == max(row[k] for k in kinds)
     drop = ["wall_time_s"]
-    pd.testing.assert_frame_equal(new.summary.drop(columns=drop),
+    pd.testing.assert_frame_equal(new.summary.drop(columns=drop + kinds),
                                   old.summary.drop(columns=drop), check_exact=True)
     for table in ("intervals", "flock", "collisions", "trajectories"):
         a, b = getattr(old, table), getattr(new, table)

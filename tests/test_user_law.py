@@ -70,12 +70,17 @@ def test_examples_are_the_readme_protocol_example():
 
 
 @pytest.mark.sumo
-def test_the_issue_command_runs_zeroctl_verbatim(user_folder):
+def test_zeroctl_runs_and_a_run_too_short_to_measure_is_refused(user_folder):
     """``cosim run default --set controller.kind=zeroctl:Zero --set scenario.duration_s=30``
-    exactly as issue 11 writes it."""
+    measures nothing (the default warm-up is 60 s): one error line, exit 2, nothing
+    written; with a warm-up and an interval that fit it runs."""
     work, env = user_folder
     proc, out = _cosim_run(work, env, "default", "--set", "controller.kind=zeroctl:Zero",
                            "--set", "scenario.duration_s=30")
+    assert proc.returncode == 2 and proc.stderr.startswith("error:"), proc.stderr
+    assert "nothing would be measured" in proc.stderr and not out.exists()
+    proc, out = _cosim_run(work, env, "default", "--set", "controller.kind=zeroctl:Zero",
+                           "--set", "scenario.duration_s=30", *SHORT)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert _summary(out)["collisions_geometric_cav"] == 0
 
@@ -87,7 +92,7 @@ def test_a_law_in_the_current_folder_is_found_without_pythonpath(user_folder):
     shutil.copy(EXAMPLES / "zeroctl.py", work / "herelaw.py")
     env = {k: v for k, v in env.items() if k != "PYTHONPATH"}
     proc, out = _cosim_run(work, env, "default", "--set", "controller.kind=herelaw:Zero",
-                           "--set", "scenario.duration_s=20", *SHORT)
+                           "--set", "scenario.duration_s=30", *SHORT)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "herelaw:Zero CAVs" in proc.stdout
     assert _config(out)["controller"]["kind"] == "herelaw:Zero"

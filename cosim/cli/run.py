@@ -53,9 +53,6 @@ MISSING = {
 def format_summary(row: dict) -> str:
     """The run summary as an aligned table; a missing figure says why."""
     lines = []
-    note = row.get("measurement_note")
-    if isinstance(note, str) and note:
-        lines.append(f"  ({note}: the traffic figures below are missing)")
     for key, label, unit, fmt in SUMMARY_KEYS:
         if key not in row:
             continue
@@ -137,9 +134,6 @@ def cmd_run(ns) -> int:
         check_display()
     print(f"running scenario '{run.name}' (seed {run.seed}, {run.duration_s:g} s simulated, "
           f"{sc.controller.kind} CAVs, {run.world} world) ...", flush=True)
-    note = run.measurement_note()
-    if note:
-        print(f"note: {note}", flush=True)
     progress = Progress(run.name, enabled=not ns.quiet)
     try:
         res = run_scenario(sc, gui=ns.gui, progress=progress)

@@ -10,12 +10,14 @@ from __future__ import annotations
 
 import dataclasses
 import typing
-from typing import TYPE_CHECKING
+from typing import Any
 
 from cosim.errors import ConfigError
+from cosim.sumo.sublanes import CHOICES_M
 
-if TYPE_CHECKING:
-    from cosim.config.scenario import Scenario
+#: a :class:`cosim.config.scenario.Scenario` (not imported: that module calls this one
+#: when a scenario is built, and the checks read its sections by name only)
+Scenario = Any
 
 #: Most vehicles a run may plan (open roads: inflows x duration; rings: density x length).
 MAX_PLANNED_VEHICLES = 1_000_000
@@ -104,12 +106,15 @@ def _check_size(sc: Scenario) -> None:
             )
     widths = road_widths_m(sc)
     if widths and sc.network.kind != "three_lane":
-        sublanes = max(widths) / run.lateral_resolution_m
+        # "auto" takes at most the coarsest width (0.8 m): at least these sublanes
+        res = (CHOICES_M[0] if _auto(run.lateral_resolution_m)
+               else run.lateral_resolution_m)
+        sublanes = max(widths) / res
         if sublanes > MAX_SUBLANES:
             raise ConfigError(
                 f"a {max(widths):g} m wide road at scenario.lateral_resolution_m = "
-                f"{run.lateral_resolution_m:g} m makes {sublanes:.0f} SUMO sublanes (at most "
-                f"{MAX_SUBLANES}): raise the lateral resolution"
+                f"{run.lateral_resolution_m!s} ({res:g} m) makes {sublanes:.0f} SUMO sublanes "
+                f"(at most {MAX_SUBLANES}): narrow the road or raise the lateral resolution"
             )
     if net.kind == "ring":
         planned = demand.ring_density_vpkm * net.circumference_m / 1000.0
@@ -127,6 +132,12 @@ def _check_size(sc: Scenario) -> None:
     if length is not None and longest >= length:
         raise ConfigError(f"demand.size_classes has a {longest:g} m long vehicle: no shorter "
                           f"than the {length:g} m road")
+
+
+def _auto(resolution) -> bool:
+    """``scenario.lateral_resolution_m = "auto"``: chosen on the built road
+    (:mod:`cosim.sumo.sublanes`: at most 0.8 m, at least 0.2 m)."""
+    return isinstance(resolution, str)
 
 
 def check_against_network(sc: Scenario, net) -> None:
@@ -176,7 +187,8 @@ def _check_widths(sc: Scenario, narrowest_m: float) -> None:
             f"vehicle (demand.size_classes: {widest:g} m) plus the edge margins "
             f"(2 x safety.edge_margin_m = {margin:g} m)"
         )
-    if sc.network.kind != "three_lane" and sc.scenario.lateral_resolution_m > narrowest_m:
+    res = sc.scenario.lateral_resolution_m
+    if sc.network.kind != "three_lane" and not _auto(res) and res > narrowest_m:
         raise ConfigError(
             f"scenario.lateral_resolution_m = {sc.scenario.lateral_resolution_m:g} m is wider "
             f"than the road's narrowest part ({narrowest_m:g} m)"

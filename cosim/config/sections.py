@@ -59,11 +59,13 @@ class RunSpec:
         duration_s: simulated time, s.
         warmup_s: time excluded from the measurements, s.
         step_length_s: SUMO and control step, s.
-        lateral_resolution_m: SUMO sublane width, m (sublane model on).
-        interval_s: measurement interval of the interval table, s. When the warm-up plus
-            one interval do not fit in the duration, the run still runs (a short look),
-            but measures nothing after the warm-up: its summary says so
-            (``measurement_note``) instead of reporting figures.
+        lateral_resolution_m: SUMO sublane width, m (sublane model on), or ``"auto"``
+            (the default): chosen from the road and the obstacle by
+            :mod:`cosim.sumo.sublanes` (0.8 m where nothing narrows, 0.2 m where SUMO's
+            drivers must pass a narrowing or a stopped car); ``meta.json`` and the
+            summary (``sumo_lateral_resolution_m``) record the width used.
+        interval_s: measurement interval of the interval table, s. The warm-up plus one
+            interval must fit in the duration (else nothing would be measured: refused).
         world: "sumo" (SUMO's road and drivers, the default) or "road" (the SUMO-free
             road world of :mod:`cosim.sim.road_world`: the same road frame, double
             integrators, non-CAVs driven by a plain IDM: for law studies and tests).
@@ -89,7 +91,7 @@ class RunSpec:
     duration_s: float = 240.0
     warmup_s: float = 60.0
     step_length_s: float = 0.1
-    lateral_resolution_m: float = 0.8
+    lateral_resolution_m: float | str = "auto"
     interval_s: float = 60.0
     world: str = "sumo"
     cav_action_step_s: float = 1.0
@@ -100,8 +102,14 @@ class RunSpec:
                 f"scenario.name {self.name!r} must start with a letter or digit and hold only "
                 "letters, digits, '_', '.' and '-' (it names output folders)"
             )
-        _finite("scenario", self, "duration_s", "step_length_s", "lateral_resolution_m",
-                "interval_s", low=0.0, strict=True)
+        _finite("scenario", self, "duration_s", "step_length_s", "interval_s", low=0.0,
+                strict=True)
+        if isinstance(self.lateral_resolution_m, str):
+            if self.lateral_resolution_m != "auto":
+                raise ConfigError("scenario.lateral_resolution_m must be a number of metres "
+                                  f"or \"auto\", got {self.lateral_resolution_m!r}")
+        else:
+            _finite("scenario", self, "lateral_resolution_m", low=0.0, strict=True)
         _finite("scenario", self, "warmup_s", low=0.0)
         if isinstance(self.seed, bool) or not isinstance(self.seed, int):
             raise ConfigError(f"scenario.seed must be an integer, got {self.seed!r}")
@@ -126,6 +134,17 @@ class RunSpec:
             )
         if self.interval_s < self.step_length_s:
             raise ConfigError("scenario.interval_s must be at least one step_length_s")
+        if self.warmup_s >= self.duration_s:
+            raise ConfigError(
+                f"scenario.warmup_s = {self.warmup_s:g} s is not shorter than the run "
+                f"(duration_s = {self.duration_s:g} s): nothing would be measured (shorten "
+                "the warm-up, e.g. --warmup, or lengthen the run)")
+        if self.warmup_s + self.interval_s > self.duration_s + 1e-9:
+            raise ConfigError(
+                f"the {self.warmup_s:g} s warm-up plus one {self.interval_s:g} s measurement "
+                f"interval do not fit in the {self.duration_s:g} s run: nothing would be "
+                "measured (shorten scenario.warmup_s or scenario.interval_s, or lengthen the "
+                "run)")
         _finite("scenario", self, "cav_action_step_s", low=0.0, strict=True)
         if not (self.step_length_s - 1e-9 <= self.cav_action_step_s
                 <= MAX_CAV_ACTION_STEP_S + 1e-9):
@@ -137,14 +156,6 @@ class RunSpec:
         if self.world not in WORLDS:
             raise ConfigError(f"scenario.world must be one of {', '.join(WORLDS)}, "
                               f"got {self.world!r}")
-
-    def measurement_note(self) -> str:
-        """Why nothing will be measured ("" when at least one interval fits)."""
-        if self.warmup_s + self.interval_s <= self.duration_s + 1e-9:
-            return ""
-        return (f"no complete measurement interval: the {self.warmup_s:g} s warm-up plus one "
-                f"{self.interval_s:g} s interval do not fit in the {self.duration_s:g} s run "
-                "(set scenario.warmup_s and scenario.interval_s)")
 
     @property
     def n_steps(self) -> int:

@@ -186,7 +186,7 @@ def write_routes(net: RoadNetwork, demand: DemandSpec, seed: int, path: Path | s
     vehicles, process, repeat = plan.vehicles, plan.process, plan.ring_route_repeat
     lines = ['<?xml version="1.0" encoding="UTF-8"?>', f"<!-- cosim demand, seed {seed} -->",
              "<routes>"]
-    lines += vtype_lines(demand, lanes=net.n_lanes > 1)
+    lines += vtype_lines(demand, lanes=net.lane_based)
     lines += _route_lines(net, repeat)
     lines += [_vehicle_line(v) for v in vehicles]
     lines.append("</routes>")

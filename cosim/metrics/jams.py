@@ -4,6 +4,8 @@ Definitions (a vehicle *stands still* while its speed is below ``v_stop``, m/s; 
 obstacles are not traffic and never count):
 
 * ``max_standstill_s``: the longest uninterrupted standstill of any vehicle, s;
+  ``max_standstill_cav_s`` and ``max_standstill_hdv_s``: the same of the CAVs and of the
+  other vehicles (SUMO's drivers), when the recorder is told which are CAVs;
 * ``vehicles_stopped_long``: vehicles that stood still longer than ``long_s`` (30 s by
   default) at least once;
 * ``blocked_windows``: windows of ``long_s`` (after the warm-up, back to back) in which
@@ -73,6 +75,9 @@ class JamRecorder:
         self.v_stop = v_stop
         self.long_s = long_s
         self.max_standstill_s = 0.0
+        self.max_standstill_cav_s = 0.0
+        self.max_standstill_hdv_s = 0.0
+        self._kinds_seen = False
         self._long_ids: set = set()
         # The previous step's vehicles, and per vehicle plus one sentinel row at the end
         # (what row -1 of :func:`align` reads: a vehicle not seen before):
@@ -96,10 +101,11 @@ class JamRecorder:
         return {self._ids[r]: float(self._t0[r]) for r in rows}
 
     def record(self, t: float, ids: list, s_front: np.ndarray, v: np.ndarray,
-               is_static: np.ndarray, prev_rows=UNALIGNED) -> None:
+               is_static: np.ndarray, prev_rows=UNALIGNED, is_cav=None) -> None:
         """One step: ids (M,), front positions (M,) m, speeds (M,) m/s, obstacle mask (M,);
         ``prev_rows``: :func:`align` of the previous step's ids and ``ids``, if the caller
-        computed it (the recorders of a run share one), else :data:`UNALIGNED`."""
+        computed it (the recorders of a run share one), else :data:`UNALIGNED`;
+        ``is_cav`` (M,) bool, optional: the standstills of CAVs and of the others apart."""
         ids = list(ids)  # a copy: kept for the next step, the caller may reuse its list
         idx = align(self._ids, ids) if prev_rows is UNALIGNED else prev_rows
         is_static = np.asarray(is_static, dtype=bool)
@@ -110,6 +116,17 @@ class JamRecorder:
             float(self.v_stop), float(self.long_s))
         if longest > self.max_standstill_s:
             self.max_standstill_s = longest
+        if is_cav is not None:
+            self._kinds_seen = True
+            if longest > 0.0:  # someone stands: split by kind (t0 NaN: moving)
+                held = t - t0[:-1]
+                cav = np.asarray(is_cav, dtype=bool) & ~is_static
+                hdv = ~np.asarray(is_cav, dtype=bool) & ~is_static
+                for mask, name in ((cav, "max_standstill_cav_s"),
+                                   (hdv, "max_standstill_hdv_s")):
+                    vals = held[mask & np.isfinite(held)]
+                    if vals.size and vals.max() > getattr(self, name):
+                        setattr(self, name, float(vals.max()))
         if len(new_long):
             self._long_ids.update([ids[r] for r in new_long.tolist()])
         self._windows(t, s_front, stopped, is_static, front_prev)
@@ -142,8 +159,12 @@ class JamRecorder:
 
     def summary(self) -> dict:
         """The run's jam figures (units in the names)."""
+        kinds = {} if not self._kinds_seen else {
+            "max_standstill_cav_s": float(self.max_standstill_cav_s),
+            "max_standstill_hdv_s": float(self.max_standstill_hdv_s)}
         return {
             "max_standstill_s": float(self.max_standstill_s),
+            **kinds,
             "vehicles_stopped_long": len(self._long_ids),
             "long_standstill_s": float(self.long_s),
             "blocked_windows": int(self.blocked_windows),

@@ -4,42 +4,47 @@
 main route (and an optional ramp route) from the lanes' real geometry, as SUMO lays
 them out: :class:`RoadNetwork`.
 
-The reference line (:func:`_reference_line`). The centre line of the main route's
-lanes, edge after edge, joined through the junction lanes SUMO drives on. Where an
-edge's lanes sit elsewhere relative to the edge as drawn than the first edge's do (after
-a width change built with netconvert's defaults, ``spreadType="right"``, the narrow
-lane hangs from the wide lane's left border and is not centred on it), that edge's
-piece is moved sideways onto the first edge's course and joined by a smooth curve, so
-the line keeps its course and the lanes that moved get ``d != 0``. ``d`` (m) is the
-signed distance from the line, positive to the left; ``s`` (m) runs along it as SUMO
-measures the main route (lane lengths plus junction lanes: :class:`_Measure`), so on
-the line's own lanes ``s = offset + lane position`` exactly, across junctions and the
-ring's seam. On the networks :mod:`cosim.road.build` generates (every edge
-``spreadType="center"``) every main-route lane is on the line: ``d`` is SUMO's lateral
-lane position, as before. An on-ramp's lanes lie right of the main road until they
-merge: a ramp vehicle's ``d`` is beyond the main road's right edge, and its ``s``
-advances by ``v dt cos(angle)`` (the main road's direction).
+The reference line (:func:`_reference_line`): the centre line of the main route's lanes,
+edge after edge, joined through the junction lanes SUMO drives on (an edge whose lanes sit
+elsewhere relative to the edge as drawn than the first edge's is moved sideways onto the
+first edge's course and joined by a smooth curve). It serves the parts of the network
+that are not on the main route (an on-ramp before it joins) and the measure: ``s`` (m)
+runs as SUMO measures the main route (lane lengths plus junction lanes:
+:class:`_Measure`), across junctions and the ring's seam. ``d`` (m) is positive to the
+left. On the networks :mod:`cosim.road.build` generates (every edge
+``spreadType="center"``) ``d`` is SUMO's lateral lane position. An on-ramp's lanes lie
+right of the main road until they merge: a ramp vehicle's ``d`` is beyond the main road's
+right edge, and its ``s`` advances by ``v dt cos(angle)`` (the main road's direction).
 
-Mapping a vehicle (:meth:`RoadNetwork.lane_frame`). SUMO places a vehicle at lane
-position ``pos`` and lateral lane position ``lat`` at the point ``P(pos) + lat n(pos)``
-of the lane's shape (``P`` at ``pos`` times the lane's geometry factor, ``n`` the left
-normal of the shape's segment there: SUMO's ``geometryPositionAtOffset``). A lane
-parallel to the line at a constant offset (every generated lane, a user's straight
-lanes) maps exactly as ``s = s0 + pos``, ``d = d0 + lat``; on other lanes SUMO's point
-is projected onto the line (the segment found from a per-lane table of ``s``, sampled
-every :data:`SAMPLE_M`, then walked to the segment that holds the foot). The inverse
-(:meth:`RoadNetwork.lateral_lane_position`) gives the ``lat`` that puts a vehicle at a
-road-frame ``d`` where it will be after the step. Both are vectorised over vehicles;
-lanes are looked up in a dict (no per-vehicle geometry in Python). In the outside corner
-of a bend of the line a point off the line that no segment holds is represented to
-``d`` times the bend (0.2 degrees per point on the smooth junction curves).
+Mapping a vehicle (:meth:`RoadNetwork.lane_frame`): SUMO's lane coordinates on the main
+route. SUMO moves a vehicle from a lane onto the junction lane and the next lane keeping
+its lateral lane position (``MSLink``'s lateral shift applies only where lane shapes do
+not meet: :func:`_link_shift`, 0 on netconvert's networks), and its collision check and
+drivers compare those positions. So every main-route lane maps as ``s = s0 + pos``,
+``d = d0 + lat`` (:func:`_lane_coordinates`): ``s0`` sums SUMO's lane lengths along the
+route, ``d0`` carries the lateral position across every connection from the first edge
+(centred on its middle lane, or the border between its two middle lanes); an edge's other
+lanes lie beside its route lane as the edge lays them out, and a junction lane beside the
+route's (where the lane count changes) carries the lateral position of the lane it
+leaves, as SUMO does. Where a narrower edge built with netconvert's defaults hangs from
+the wider one's left border, SUMO draws a vehicle that keeps its lateral position jumping
+sideways along the short junction lane; in its coordinates, and so in ours, the vehicle
+drives straight, and the neck lies centred (what the law keeps apart SUMO keeps apart:
+tests/test_user_roads.py). :meth:`RoadNetwork.xy_of` maps ``(s, d)`` back to SUMO's x, y
+(SUMO's point ``P(pos) + lat n(pos)`` on the route lane at ``s``: ``geometryPositionAt
+Offset``). An on-ramp's lanes, until they join the route, are projected onto the line (the
+segment found from a per-lane table of ``s``, sampled every :data:`SAMPLE_M`, then walked
+to the segment that holds the foot). The inverse (:meth:`RoadNetwork.lateral_lane_position`)
+gives the ``lat`` that puts a vehicle at a road-frame ``d`` where it will be after the
+step. Both are vectorised over vehicles; lanes are looked up in a dict (no per-vehicle
+geometry in Python).
 
 The road's edges along ``s`` (:meth:`RoadNetwork.profile`): the outer borders of the
 main route's lanes (right border of the rightmost, left border of the leftmost), in the
-frame, sampled every :data:`SAMPLE_M`; across a junction they run linearly from the
-borders where one edge's lanes end to where the next edge's begin (the junction's
-paved area; where an edge adds a lane beside the road, e.g. an on-ramp's acceleration
-lane, the added lane's border holds from the junction's start). Right and left edges
+frame, sampled every :data:`SAMPLE_M`; across a junction they are the junction lanes' own
+borders, so a width change is a step at the junction lane's start, as SUMO sees it
+(where an edge adds a lane beside the road, e.g. an on-ramp's acceleration lane, the
+added lane's border holds from the junction's start). Right and left edges
 are independent (asymmetric roads are fine). The
 profile is piecewise constant: flat stretches are one piece each, and where an edge
 moves the pieces are short enough that it moves by at most :data:`PROFILE_TOL_M` within
@@ -379,6 +384,8 @@ class _Tables:
     par: np.ndarray | None = None  # (lanes,) bool: the lane runs parallel to the line
     par_s0: np.ndarray | None = None  # (lanes,) s of its position 0, m
     par_d0: np.ndarray | None = None  # (lanes,) d of its centre, m
+    chain_keys: np.ndarray | None = None  # the main route's chain of lanes, in order of s
+    chain_s0: np.ndarray | None = None  # s (m) where each of them starts
     _kernel_args: tuple | None = field(default=None, repr=False, compare=False)
 
     def kernel_args(self) -> tuple:
@@ -575,6 +582,13 @@ class RoadNetwork:
     #: them is on the main road; a ramp's lanes and its junction lanes are not
     main_lanes: frozenset = field(default=frozenset(), repr=False, compare=False)
 
+    @property
+    def lane_based(self) -> bool:
+        """True for the lane-based baseline (``three_lane``: SUMO's LC2013 drivers keep
+        lanes). Every other road, a user's multi-lane network included, is lane-free:
+        SUMO's sublane model, the lanes only carry the geometry."""
+        return self.kind == "three_lane"
+
     # ---- vehicles: SUMO (lane, position, lateral position) <-> road frame (s, d) --------
 
     def lane_keys(self, lanes: Sequence[str]) -> np.ndarray:
@@ -638,9 +652,24 @@ class RoadNetwork:
         return _lateral_numpy(tb, k, pos, d)
 
     def xy_of(self, s_m: np.ndarray, d_m: np.ndarray) -> np.ndarray:
-        """``(x, y)`` (N, 2) in the network's coordinates of road-frame positions (m)."""
-        g = self.tables.measure.to_g(np.atleast_1d(np.asarray(s_m, dtype=float)))
-        return self.tables.line.point(g, np.atleast_1d(d_m))
+        """``(x, y)`` (N, 2) in the network's coordinates where SUMO draws a vehicle's
+        reference point at road-frame positions (m) on the main route: on the route's chain
+        of lanes (the middle lane of each edge and the junction lanes it drives through) at
+        lane position ``s - s0`` and lateral lane position ``d - d0`` (SUMO's
+        ``geometryPositionAtOffset``; where a lane's centre moves sideways across a
+        junction, SUMO's drawing jumps there, see :func:`_lane_coordinates`)."""
+        tb = self.tables
+        s = np.atleast_1d(np.asarray(s_m, dtype=float))
+        d = np.broadcast_to(np.atleast_1d(np.asarray(d_m, dtype=float)), s.shape)
+        if self.periodic:
+            s = np.mod(s, self.length_m)
+        i = np.clip(np.searchsorted(tb.chain_s0, s, side="right") - 1, 0, len(tb.chain_s0) - 1)
+        k = tb.chain_keys[i]
+        pos = s - tb.chain_s0[i]
+        pt, nrm, _ = _lane_points(tb, k, pos)
+        beyond = pos - np.clip(pos, 0.0, tb.lane_len[k])  # past the route's ends: straight on
+        tang = np.column_stack([nrm[:, 1], -nrm[:, 0]])
+        return pt + (d - tb.par_d0[k])[:, None] * nrm + beyond[:, None] * tang
 
     def s_of(self, lane_or_edge: str, pos_m: float) -> float:
         """Continuous ``s`` (m) of lane position ``pos_m`` on a lane's centre (an edge: its
@@ -1169,6 +1198,124 @@ def _find_parallel(tb: _Tables, chain_off: dict[int, float]) -> None:
     object.__setattr__(tb, "par_d0", d0)
 
 
+def _centre_on_edge(lane: Any) -> float:
+    """Lateral position (m) of a lane's centre on its edge, from the edge's right side (the
+    lanes of lower index are to the right: SUMO's ``getRightSideOnEdge`` plus half a width)."""
+    edge = lane.getEdge()
+    right = sum(float(ln.getWidth()) for ln in edge.getLanes() if ln.getIndex() < lane.getIndex())
+    return right + 0.5 * float(lane.getWidth())
+
+
+def _link_shift(before: Any, after: Any) -> float:
+    """SUMO's lateral shift (m, added to the lateral lane position) of a vehicle passing from
+    lane ``before`` onto ``after`` (``MSLink``: only where the two shapes do not meet, and
+    only for links through or out of a junction lane; netconvert's junction lanes always
+    meet the lanes they join, so this is 0 on every network netconvert builds).
+
+    Where the shapes do not meet SUMO keeps the vehicle where it is: ``after``'s start lies
+    ``dist`` to the right of ``before``'s end gives ``+dist`` (the vehicle is that much
+    left of the new centre)."""
+    internal = after.getEdge().getFunction() == "internal" or \
+        before.getEdge().getFunction() == "internal"
+    a = np.asarray(before.getShape(), dtype=float)[:, :2]
+    b = np.asarray(after.getShape(), dtype=float)[:, :2]
+    gap = b[0] - a[-1]
+    dist = float(np.hypot(*gap))
+    if not internal or dist == 0.0 or len(a) < 2:
+        return 0.0
+    t = a[-1] - a[-2]
+    n_left = np.array([-t[1], t[0]]) / max(float(np.hypot(*t)), 1e-12)
+    return dist if float(gap @ n_left) < 0.0 else -dist
+
+
+def _lane_coordinates(net: Any, tb: _Tables, route: Sequence[str], periodic: bool,
+                      chain_off: dict[int, float]) -> dict[int, tuple[float, float]]:
+    """SUMO's own lane coordinates of every main-route lane: table key -> ``(s0, d0)`` (m)
+    such that a vehicle at lane position ``pos`` and lateral lane position ``lat`` is at
+    ``s = s0 + pos``, ``d = d0 + lat``.
+
+    SUMO moves a vehicle from lane to lane keeping its lateral lane position (plus
+    :func:`_link_shift`, 0 on netconvert's networks): its collision check, its drivers'
+    view of each other and the lateral bookkeeping of a vehicle's back on the lanes it
+    still occupies all compare lateral lane positions as if the lanes' centres lined up
+    across every joint (MSVehicle, MSLane::detectCollisionBetween). Where a lane's centre
+    moves sideways at a joint (a width change built with netconvert's defaults hangs the
+    narrower lane from the left border), SUMO draws a vehicle that keeps its lateral lane
+    position jumping sideways along the short junction lane between them, at an angle;
+    in SUMO's own coordinates it drives straight. The road frame follows SUMO's
+    coordinates on the main route, so that what the law keeps apart SUMO keeps apart.
+
+    ``d0``: the first edge's lanes are placed across it as SUMO places them (the middle
+    lane's centre, or the border between the two middle lanes, at 0); each connection
+    carries the lateral position from a lane onto its junction lanes and the next edge's
+    lane; the next edge's other lanes are placed across that edge. ``s0``: the measure's
+    chain offsets (SUMO's lane lengths summed); a lane beside the chain starts where its
+    edge's chain lane starts, a junction lane where the lane before it ends.
+    """
+    out: dict[int, tuple[float, float]] = {}
+    idx = tb.index
+    period = tb.measure.s_period if periodic else None
+
+    def put(lane: Any, s0: float, d0: float) -> None:
+        k = idx[lane.getID()]
+        if k not in out:
+            if period is not None:
+                s0 = float(np.mod(s0, period))
+            out[k] = (float(chain_off.get(k, s0)), d0)
+
+    edges = [net.getEdge(e) for e in route]
+    first = _lanes_of(edges[0])
+    mid = first[len(first) // 2]
+    centre = _centre_on_edge(mid) - (0.0 if len(first) % 2 else 0.5 * float(mid.getWidth()))
+    d_edge = {ln.getID(): _centre_on_edge(ln) - centre for ln in first}
+    for k, edge in enumerate(edges):
+        ref = _reference_lane(edge)
+        nxt_id = route[k + 1] if k + 1 < len(route) else (route[0] if periodic else None)
+        conns = _connections(edge, nxt_id) if nxt_id is not None else []
+        main_conn = next((c for c in conns if c.getFromLane() is ref), conns[0]) \
+            if conns else None
+        chain_lane = main_conn.getFromLane() if main_conn is not None else ref
+        s_edge = float(chain_off[idx[chain_lane.getID()]])
+        for ln in _lanes_of(edge):
+            put(ln, s_edge, d_edge[ln.getID()])
+        if main_conn is None:
+            break
+        d_next = None
+        for conn in [main_conn] + [c for c in conns if c is not main_conn]:
+            a = conn.getFromLane()
+            s = out[idx[a.getID()]][0] + float(a.getLength())
+            d = out[idx[a.getID()]][1]
+            prev = a
+            for via in _via_chain(net, conn, nxt_id):
+                d += _link_shift(prev, via)
+                put(via, s, d)
+                s += float(via.getLength())
+                prev = via
+            d += _link_shift(prev, conn.getToLane())
+            if conn is main_conn:
+                d_next = (conn.getToLane(), d)
+        if k + 1 < len(edges):
+            to_lane, d_to = d_next
+            c_to = _centre_on_edge(to_lane)
+            d_edge = {ln.getID(): d_to + _centre_on_edge(ln) - c_to
+                      for ln in _lanes_of(edges[k + 1])}
+    return out
+
+
+def _use_lane_coordinates(tb: _Tables, coords: dict[int, tuple[float, float]],
+                          chain_off: dict[int, float]) -> None:
+    """Map every main-route lane by SUMO's lane coordinates (:func:`_lane_coordinates`):
+    ``s = s0 + pos``, ``d = d0 + lat`` (the parallel path); the other lanes (an on-ramp
+    before it joins the road) keep the projection onto the reference line."""
+    for k, (s0, d0) in coords.items():
+        tb.par[k] = True
+        tb.par_s0[k] = s0
+        tb.par_d0[k] = round(d0, 9)
+    keys = np.array(sorted(chain_off, key=chain_off.get), dtype=np.int64)
+    object.__setattr__(tb, "chain_keys", keys)
+    object.__setattr__(tb, "chain_s0", np.array([chain_off[int(k)] for k in keys]))
+
+
 def _lane_cos(tb: _Tables, k: np.ndarray, pos: np.ndarray) -> np.ndarray:
     """d per metre of lateral lane position (the cosine of the lane's angle to the line)."""
     pt, nrm, key = _lane_points(tb, k, pos)
@@ -1205,6 +1352,9 @@ def _edge_borders(tb: _Tables, lanes: list[_LaneGeo], edge_lanes: list[int], edg
     right = np.min([np.interp(grid, s, r) for s, r in zip(grids, rights, strict=True)], axis=0)
     left = np.max([np.interp(grid, s, v) for s, v in zip(grids, lefts, strict=True)], axis=0)
     if len(edge_lanes) > 1:
+        # the lanes as drawn must not cross (SUMO's lane coordinates would not tell)
+        centres = [_frame_geo(tb, np.full(len(s), k), np.linspace(0.0, tb.lane_len[k], len(s)),
+                              np.zeros(len(s)))[1] for s, k in zip(grids, edge_lanes, strict=True)]
         cs = np.array([np.interp(grid, s, c) for s, c in zip(grids, centres, strict=True)])
         gaps = np.diff(cs, axis=0)
         if gaps.min() <= 0.0:
@@ -1217,6 +1367,40 @@ def _edge_borders(tb: _Tables, lanes: list[_LaneGeo], edge_lanes: list[int], edg
     if np.any(left <= right):
         raise NetworkError(f"edge {edge!r} has no width in the road frame")
     return grid, right, left
+
+
+def _junction_borders(tb: _Tables, lanes: list[_LaneGeo], net: Any, edge: str, nxt: str,
+                      periodic: bool, length: float
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """``(s, right, left)`` samples (m) of the main route's junction lanes from ``edge`` to
+    ``nxt``: at each ``s`` the outermost borders of the junction lanes there; None when the
+    edges join without junction lanes."""
+    keys = []
+    for conn in _connections(net.getEdge(edge), nxt):
+        keys += [tb.index[ln.getID()] for ln in _via_chain(net, conn, nxt)
+                 if ln.getID() in tb.index and lanes[tb.index[ln.getID()]].main]
+    keys = sorted(set(keys))
+    if not keys:
+        return None
+    grids, rights, lefts = [], [], []
+    for k in keys:
+        n = max(2, int(math.ceil(tb.lane_len[k] / SAMPLE_M)) + 1)
+        p = np.linspace(0.0, tb.lane_len[k], n)
+        s, dc = _frame_of(tb, np.full(n, k), p, np.zeros(n))
+        if periodic:
+            s = s[0] + np.concatenate([[0.0], np.cumsum(_wrap(np.diff(s), length))])
+        half = 0.5 * lanes[k].width * (1.0 if tb.par[k] else _lane_cos(tb, np.full(n, k), p))
+        grids.append(s)
+        rights.append(dc - half)
+        lefts.append(dc + half)
+    grid = np.unique(np.concatenate(grids))
+    inside = [(grid >= s[0] - 1e-9) & (grid <= s[-1] + 1e-9) for s in grids]
+    right = np.min([np.where(m, np.interp(grid, s, r), np.inf)
+                    for s, r, m in zip(grids, rights, inside, strict=True)], axis=0)
+    left = np.max([np.where(m, np.interp(grid, s, v), -np.inf)
+                   for s, v, m in zip(grids, lefts, inside, strict=True)], axis=0)
+    ok = np.isfinite(right) & np.isfinite(left)
+    return grid[ok], right[ok], left[ok]
 
 
 def _pieces(s: np.ndarray, right: np.ndarray, left: np.ndarray, length: float,
@@ -1271,6 +1455,14 @@ def _profile(tb: _Tables, lanes: list[_LaneGeo], net: Any, route: Sequence[str],
             s = np.concatenate([[s_all[-1][-1] + 1e-3], s])
             r = np.concatenate([[min(r[0], r_all[-1][-1])], r])
             left = np.concatenate([[max(left[0], l_all[-1][-1])], left])
+        elif k or periodic:
+            # the junction before this edge: as wide as SUMO's junction lanes (each as wide
+            # as the lane it leads onto), not a linear change between the edges
+            junction = _junction_borders(tb, lanes, net, route[k - 1], eid, periodic, length)
+            if junction is not None:
+                s_all.append(junction[0])
+                r_all.append(junction[1])
+                l_all.append(junction[2])
         ref = tb.index[eid]
         s_ref, _ = _frame_of(tb, np.array([ref, ref]), np.array([0.0, tb.lane_len[ref]]),
                              np.zeros(2))
@@ -1363,6 +1555,8 @@ def _road_network(path: Path, net: Any, kind: str, main_route: Sequence[str],
     measure, chain_off = _measure(tb, net, main_route, periodic)
     object.__setattr__(tb, "measure", measure)
     _find_parallel(tb, chain_off)
+    _use_lane_coordinates(tb, _lane_coordinates(net, tb, main_route, periodic, chain_off),
+                          chain_off)
     length = measure.s_period if periodic else float(
         measure.to_s(np.array([line.length]))[0])
     s0, right, left, spans = _profile(tb, lanes, net, main_route, periodic, length)

@@ -91,7 +91,8 @@ def attach_recorders(loop: Loop, traffic: TrafficRecorder, jams: JamRecorder, *,
         ss.prev_rows = align(rec.prev_ids, ss.ids)
         rec.prev_ids = ss.ids
         traffic.record(ss, world.collisions())
-        jams.record(st.t, ss.ids, ss.s_front, ss.v, ss.is_static, prev_rows=ss.prev_rows)
+        jams.record(st.t, ss.ids, ss.s_front, ss.v, ss.is_static, prev_rows=ss.prev_rows,
+                    is_cav=ss.is_cav)
         if capacity is not None:
             new = [v for v in world.departed_now if v != loop.obstacle_id]
             capacity.record(ss, world.pending, len(new))

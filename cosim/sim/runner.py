@@ -31,6 +31,7 @@ from cosim.output_dir import check_output_dir
 from cosim.sim.loop import Loop
 from cosim.sim.recording import CapacityRecorder, attach_recorders
 from cosim.sim.results import RunResult, versions
+from cosim.sumo.sublanes import scenario_resolution_m
 
 #: A cross-section this far (m) past a stopped obstacle's front measures the flow past it.
 OBSTACLE_SECTION_M = 10.0
@@ -161,8 +162,9 @@ def build_world(sc: Scenario, work: Path, gui: bool = False):
         # human drivers (scenario.cav_action_step_s), and that changes its insertions
         "--step-method.ballistic", "false",
     ]
-    if net.n_lanes <= 1:  # sublane model only on lane-free roads; LC2013 refuses it
-        args += ["--lateral-resolution", str(run.lateral_resolution_m)]
+    resolution = None if net.lane_based else scenario_resolution_m(sc, net)
+    if resolution is not None:  # sublane model only on lane-free roads; LC2013 refuses it
+        args += ["--lateral-resolution", f"{resolution:g}"]
     detectors = None
     if sc.outputs.sumo_detectors:
         detectors = write_detectors(net, [x for x in xs if x <= net.length_m],
@@ -173,6 +175,7 @@ def build_world(sc: Scenario, work: Path, gui: bool = False):
     action_step = run.cav_action_step_s if routes.n_hdv == 0 else run.step_length_s
     world = SumoWorld(net, args, dt=run.step_length_s, desired=routes.desired_speed_mps,
                       gui=gui, cav_action_step_s=action_step)
+    world.lateral_resolution_m = resolution  # SUMO's sublane width, m (None: lanes)
     return world, net, plan, detectors
 
 
@@ -224,7 +227,8 @@ def _run_in(sc: Scenario, work: Path, gui: bool, progress, hooks) -> RunResult:
 
     summary = traffic.summary()
     summary.update(jams.summary())
-    summary["measurement_note"] = run.measurement_note()
+    resolution = getattr(world, "lateral_resolution_m", None)
+    summary["sumo_lateral_resolution_m"] = np.nan if resolution is None else resolution
     obstacle_id = loop.obstacle_id
     n_planned = len(plan.vehicles)
     n_departed = len(rec.departed - {obstacle_id})
@@ -271,6 +275,7 @@ def _run_in(sc: Scenario, work: Path, gui: bool, progress, hooks) -> RunResult:
         "versions": versions(),
         "world": run.world,
         "sumo_cav_action_step_s": getattr(world, "cav_action_step_s", None),
+        "sumo_lateral_resolution_m": resolution,
         "network": {"file": str(getattr(net, "net_file", "")), "kind": net.kind,
                     "length_m": net.length_m},
         "demand": {"vehicles": n_planned, "arrival_process": plan.process,

@@ -26,7 +26,8 @@ def _run(name: str, overrides: dict) -> None:
     from cosim.config.scenario import load_scenario
     from cosim.sim.runner import run_scenario
 
-    over = {"scenario.duration_s": WARM_S, "scenario.warmup_s": 1.0, **overrides}
+    over = {"scenario.duration_s": WARM_S, "scenario.warmup_s": 1.0,
+            "scenario.interval_s": WARM_S - 1.0, **overrides}
     run_scenario(load_scenario(name, over))
 
 

@@ -194,6 +194,7 @@ class SumoWorld:
         self._pos = np.zeros(0)
         self._lat = np.zeros(0)
         self._sublane = np.zeros(0, dtype=bool)
+        self._straddle = np.zeros(0, dtype=bool)
         self._set_fns: tuple | None = None  # (setSpeed, setLateralLanePosition)
         self._static_ids: list | None = None  # the vehicles of _static_cols, in order
         self._static_cols: tuple = ()
@@ -317,6 +318,7 @@ class SumoWorld:
         # vehicles to move sideways with changeSublane (see apply): the back still on the
         # lane before, or on an edge of several lanes
         sublane = pos < length
+        self._straddle = sublane.copy()  # the back still on the lane before
         if self._side_lanes:
             sublane |= self._code_side[codes]
         self._sublane = sublane
@@ -412,7 +414,7 @@ class SumoWorld:
         if self._side_lanes:
             lanes = self._lanes
             crossed = self._cross_lanes(ids, [lanes[r] for r in rows.tolist()], pos, v_next,
-                                        d_next, lats, moved)
+                                        d_next, lats, moved, self._straddle[rows])
         if self._set_fns is None:
             self._set_fns = self._setters(veh)
         set_speed, set_lat = self._set_fns
@@ -466,19 +468,27 @@ class SumoWorld:
         self._every_step = keep
 
     def _cross_lanes(self, ids: list, lanes: list, pos: np.ndarray, v_next: np.ndarray,
-                     d_next: np.ndarray, lats: np.ndarray, moved: np.ndarray) -> list:
+                     d_next: np.ndarray, lats: np.ndarray, moved: np.ndarray,
+                     straddle: np.ndarray) -> list:
         """Move CAVs whose commanded centre ``d_next`` (m) lies on another lane of their
         edge onto that lane (``moveTo`` at their position now; SUMO keeps the speed and
         advances them in the step), and rewrite their lateral lane positions ``lats`` (m)
         in place, and take them out of ``moved`` (N,) (placed, not moved with changeSublane, in
         this step); returns their ids. A lateral lane position beyond the lane's border
         would leave the vehicle on its old lane in SUMO's eyes: drawn across the border,
-        unseen by the drivers on the neighbouring lane, and stopped at the old lane's end."""
+        unseen by the drivers on the neighbouring lane, and stopped at the old lane's end.
+
+        A CAV whose back is still on the lane before (``straddle`` (N,) bool: it has just
+        crossed a joint) is not moved: ``moveTo`` would put its back on that lane at the new
+        lane's lateral position (SUMO keeps one per lane the back occupies), metres away from
+        where it is, and SUMO's junction collision check would see a body turned across the
+        road (a user's 3 -> 2 lane drop: 20 degrees, a collision with the vehicle beside);
+        it moves with ``changeSublane`` until its back has left the joint."""
         side = self._side_lanes
         crossed = []
         for i, lane in enumerate(lanes):
             spans = side.get(lane)
-            if spans is None:
+            if spans is None or straddle[i]:
                 continue
             d = float(d_next[i])
             here = next(sp for sp in spans if sp[0] == lane)

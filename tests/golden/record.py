@@ -34,7 +34,8 @@ CASES: dict[str, dict] = {
         "controller": {"kind": "flocking_timegap"},
     },
     "boundary_points_obstacle": {
-        "scenario": {"name": "g_bp", "seed": 2, **SHORT},
+        # the sublane width the golden was recorded at ("auto" would take 0.4 m here)
+        "scenario": {"name": "g_bp", "seed": 2, "lateral_resolution_m": 0.8, **SHORT},
         "network": {"kind": "straight", "length_m": 600.0},
         "demand": {"inflow_vph": 2000.0, "cav_share": 0.8},
         "controller": {"kind": "boundary_points"},

@@ -90,7 +90,8 @@ on-ramp) counts as on the road, at its nearest inside position, once it is withi
 speed towards the road (from its positions: a ramp vehicle reports none across its own
 lane); a moving vehicle whose body leaves the narrowest edges of the next
 ``max(squeeze_min_m, squeeze_s * v)`` metres counts at its nearest inside position there
-(a human driver that a narrowing will squeeze in: CAVs make room before it is pushed in).
+(a human driver that a narrowing will squeeze in: CAVs make room before it is pushed in;
+also one that hugs the edge just before an abrupt step).
 
 All terms are computed per CAV over a fixed window of neighbours in road order (no N x N
 array), in compiled kernels (numba; :mod:`.kernels`) that give what the vectorised numpy

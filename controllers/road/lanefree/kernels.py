@@ -343,7 +343,7 @@ def plan(P, rows, frac, lo, hi, current, j, ds, s, d, v, length, width, is_cav, 
 # ------------------------------------------------------------------ interactions
 @njit(cache=True)
 def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targets,
-             urgent, held, lead_gap, lead_v, v_des, edges, has_edges):
+             urgent, held, lead_gap, lead_v, v_des, edges, has_edges, static):
     """Everything of one step that needs the window, per CAV:
 
     * side bounds ``hi``, ``lo`` (N,) m (the law's ``_side``);
@@ -355,7 +355,13 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
       pairs asked before the zipper rule took some back (``n_asked``: the law applies its
       patience rule whenever one did);
     * lateral command (N,) m/s^2 (the law's ``_lateral``; ``edges`` (N, 2) m, the road
-      edges of the target's look-ahead, used when ``has_edges``).
+      edges of the target's look-ahead, used when ``has_edges``). The repulsion of the
+      vehicles alongside never pushes a CAV towards a stopped obstacle (``static`` (M,)
+      bool) ahead of it within :data:`BLOCK_REACH_S` of travel (at least
+      :data:`BLOCK_REACH_M`) and less than twice the lateral clearance to the side: a CAV
+      behind a stopped car, steering for the gap beside it, would be held against the car
+      by the traffic passing on the other side (a user's neck with a stopped car: standing
+      for minutes).
     """
     k2 = j.shape[1]
     u_long = np.empty(n)
@@ -379,6 +385,9 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
         u_win = np.inf
         u_zip = np.inf
         mover_i = urgent[i]
+        block_left = False  # a stopped obstacle ahead, close on this side
+        block_right = False
+        block_reach = max(BLOCK_REACH_M, BLOCK_REACH_S * v_i)
         for k in range(k2):
             x = ds[i, k]
             ddk = dd[i, k]
@@ -411,6 +420,11 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
                 else:
                     lo = max(lo, d[jj] + need)
             side_gap = abs(ddk) - half_w
+            if static[jj] and x > 0 and x - half_l < block_reach and side_gap < P[TWOLC]:
+                if ddk > 0:
+                    block_left = True
+                else:
+                    block_right = True
             pk = 0.0
             if al and side_gap < P[TWOLC]:
                 pk = P[RG] * (P[TWOLC] - side_gap) / P[TWOLC]
@@ -434,10 +448,16 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
                 into = abs(tgt - d_i) < half_w + P[FM]
                 not_yet = abs(ddk) >= half_w
                 a_k = j_cav and moving and into and not_yet
-                a_k = a_k or ((not j_cav) and held[jj] and abs(ddk) < half_w + 2.5 and not_yet)
+                # (only from behind it: a CAV alongside that stopped would take the very
+                # space the driver waits for; it goes on instead)
+                held_k = ((not j_cav) and held[jj] and abs(ddk) < half_w + HELD_REACH_M
+                          and not_yet and g > 0)
+                a_k = a_k or held_k
                 if a_k:
                     n_asked += 1
-                    u_c = _follow(P, g, v_j, accel[jj], j_cav, v_i, P[CT], P[CT])
+                    # a held-up human driver moves out only with SUMO's gap behind it
+                    g_c = g - HELD_GAP_M if held_k else g
+                    u_c = _follow(P, g_c, v_j, accel[jj], j_cav, v_i, P[CT], P[CT])
                     if not (j_cav and ((u_c < -P[YD]) or (g < P[ZG]))):
                         ask[i, k] = True
                         u_yield[i, k] = max(u_c, -P[YD])
@@ -466,6 +486,10 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
         u_long[i] = u
         # ---- lateral
         ul = P[KY] * (targets[i] - d_i) - P[CY] * vl_i
+        if block_left or block_right:  # no push towards the stopped obstacle
+            for k in range(k2):
+                if (block_left and push[k] < 0) or (block_right and push[k] > 0):
+                    push[k] = np.sign(push[k]) * 0.0
         ul -= pairwise_sum(push, k2)
         vmax = P[VMAX]
         a2 = P[L2A]
@@ -500,6 +524,18 @@ def linspace01(num):
     out[num - 1] = 1.0
     return out
 
+
+#: A held-up human driver (see the law's ``_held``) is given a gap by the CAVs behind it
+#: whose centre is within this of its side (the band it merges into, not the one beyond),
+#: m, and the gap they keep behind it is larger by SUMO's ``minGap`` (2.5 m) plus 0.5 m:
+#: SUMO's driver changes its lateral position only with that gap to its follower there.
+HELD_REACH_M = 1.0
+HELD_GAP_M = 3.0
+
+#: The repulsion does not push a CAV towards a stopped obstacle ahead within this time of
+#: travel (s), or this distance (m) when slower (bumper to bumper).
+BLOCK_REACH_S = 3.0
+BLOCK_REACH_M = 15.0
 
 #: A congested CAV's target within this of a row is not pulled to it, m.
 ROW_SLACK_M = 0.5
@@ -652,9 +688,12 @@ def law_step(P, s, d, v, v_lat, length, width, accel, is_cav, n, order, k_side, 
             urgent[i] = False
     lead_gap, lead_v = leader_gaps(s, d, length, width, np.arange(n), reach_lead, periodic,
                                    period, P[FM], v, order, rank)
+    static = np.zeros(m, np.bool_)
+    for q in range(static_idx.shape[0]):
+        static[static_idx[q]] = True
     u_long, hi_n, lo_n, u_lat, ask, u_yield, n_asked = interact(
         P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, target, urgent, held,
-        lead_gap, lead_v, v_des, edges, True)
+        lead_gap, lead_v, v_des, edges, True, static)
     u = np.empty((n, 2))
     for i in range(n):
         u[i, 0] = min(max(u_long[i], P[LMIN]), P[LMAX])

@@ -320,11 +320,14 @@ class LaneFreeFlocking:
         reach_m = p.entry_reach_m + p.entry_horizon_s * np.maximum(inward_mps, 0.0)
         merging = (out > 0) & (out < reach_m)
         d[merging] = np.clip(d[merging], lo[merging], np.maximum(lo, hi)[merging])
-        # a moving vehicle on the road that the road narrows on within its squeeze horizon
-        # (SUMO's drivers move in only when their lane's edge reaches them) is taken at its
-        # nearest inside position there: CAVs beside it make room before it is pushed in
+        # a moving vehicle on the road (or merging onto it) that the road narrows on within
+        # its squeeze horizon (SUMO's drivers move in only when their lane's edge reaches
+        # them) is taken at its nearest inside position there: CAVs beside it make room
+        # before it is pushed in, CAVs behind it keep their gap to it. A human driver
+        # hugging the edge just before a step is "merging" by a few cm; seen only at the
+        # edge it is beside a CAV it is about to cut in front of (a user's abrupt step)
         if not obs.road.is_constant:
-            moving = (out <= 0) & (np.abs(op[:, 0]) > 0.1)
+            moving = ((out <= 0) | merging) & (np.abs(op[:, 0]) > 0.1)
             if moving.any():
                 ahead_m = np.maximum(p.squeeze_min_m, p.squeeze_s * op[moving, 0])
                 narrow = obs.road.narrowest(oq[moving, 0], ahead_m)
