@@ -17,12 +17,12 @@ right of the main road until they merge: a ramp vehicle's ``d`` is beyond the ma
 right edge, and its ``s`` advances by ``v dt cos(angle)`` (the main road's direction).
 
 Mapping a vehicle (:meth:`RoadNetwork.lane_frame`): SUMO's lane coordinates on the main
-route. SUMO moves a vehicle from a lane onto the junction lane and the next lane keeping
-its lateral lane position (``MSLink``'s lateral shift applies only where lane shapes do
-not meet: :func:`_link_shift`, 0 on netconvert's networks), and its collision check and
-drivers compare those positions. So every main-route lane maps as ``s = s0 + pos``,
-``d = d0 + lat`` (:func:`_lane_coordinates`): ``s0`` sums SUMO's lane lengths along the
-route, ``d0`` carries the lateral position across every connection from the first edge
+route (:mod:`cosim.road.lane_coordinates`). SUMO moves a vehicle from a lane onto the
+junction lane and the next lane keeping its lateral lane position (``MSLink``'s lateral
+shift applies only where lane shapes do not meet, never on netconvert's networks), and
+its collision check and drivers compare those positions. So every main-route lane maps as
+``s = s0 + pos``, ``d = d0 + lat``: ``s0`` sums SUMO's lane lengths along the route,
+``d0`` carries the lateral position across every connection from the first edge
 (centred on its middle lane, or the border between its two middle lanes); an edge's other
 lanes lie beside its route lane as the edge lays them out, and a junction lane beside the
 route's (where the lane count changes) carries the lateral position of the lane it
@@ -59,7 +59,6 @@ a route that turns back on itself, and geometry sumolib cannot read.
 from __future__ import annotations
 
 import math
-import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -70,6 +69,14 @@ import numpy as np
 
 from controllers.observation import RoadProfile
 from cosim.errors import ConfigError, NetworkError
+from cosim.road.lane_coordinates import lane_coordinates, use_lane_coordinates
+from cosim.road.sumo_net import (
+    connections,
+    lanes_of,
+    read_sumo_net,
+    reference_lane,
+    via_chain,
+)
 
 #: Spacing (m) of the per-lane tables of ``s`` and of the road-edge samples.
 SAMPLE_M = 1.0
@@ -657,7 +664,7 @@ class RoadNetwork:
         of lanes (the middle lane of each edge and the junction lanes it drives through) at
         lane position ``s - s0`` and lateral lane position ``d - d0`` (SUMO's
         ``geometryPositionAtOffset``; where a lane's centre moves sideways across a
-        junction, SUMO's drawing jumps there, see :func:`_lane_coordinates`)."""
+        junction, SUMO's drawing jumps there, see :func:`lane_coordinates`)."""
         tb = self.tables
         s = np.atleast_1d(np.asarray(s_m, dtype=float))
         d = np.broadcast_to(np.atleast_1d(np.asarray(d_m, dtype=float)), s.shape)
@@ -767,81 +774,6 @@ class RoadNetwork:
         return float(np.clip(pos - err, 0.0, tb.lane_len[k]))
 
 
-# --------------------------------------------------------------------------------------
-# Reading the network
-# --------------------------------------------------------------------------------------
-
-
-def _read_sumo_net(path: Path) -> Any:
-    import sumolib
-
-    try:
-        net = sumolib.net.readNet(str(path), withInternal=True)
-    except Exception as exc:  # sumolib raises SAX, KeyError, ValueError... on bad files
-        why = _diagnose(path)
-        if why:
-            raise NetworkError(f"network {path.name}: {why}") from None
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        raise NetworkError(f"cannot read network {path}: {type(exc).__name__}: {msg}") from None
-    if not net.getEdges(withInternal=False):
-        raise NetworkError(f"network {path} has no edges (is it a .net.xml?)")
-    return net
-
-
-def _diagnose(path: Path) -> str | None:
-    """Why sumolib could not read a file we can parse as XML (None: no idea)."""
-    try:
-        lanes: dict[str, int] = {}
-        current = None
-        for event, el in ET.iterparse(str(path), events=("start", "end")):
-            if event == "start" and el.tag == "edge":
-                current = el.get("id")
-                lanes[current] = 0
-            elif event == "start" and el.tag == "lane" and current is not None:
-                lanes[current] += 1
-            elif event == "end" and el.tag == "edge":
-                current = None
-                el.clear()
-    except (ET.ParseError, OSError, UnicodeDecodeError):
-        return None
-    empty = [e for e, n in lanes.items() if n == 0]
-    if empty:
-        more = f" (and {len(empty) - 1} more)" if len(empty) > 1 else ""
-        return f"edge {empty[0]!r}{more} has no <lane>: every edge needs at least one lane"
-    return None
-
-
-def _lanes_of(edge: Any) -> list[Any]:
-    lanes = sorted(edge.getLanes(), key=lambda ln: ln.getIndex())
-    if not lanes:
-        raise NetworkError(f"edge {edge.getID()!r} has no lanes: every route edge needs one")
-    return lanes
-
-
-def _reference_lane(edge: Any) -> Any:
-    lanes = _lanes_of(edge)
-    return lanes[len(lanes) // 2]
-
-
-def _via_chain(net: Any, conn: Any, to_edge: str) -> list[Any]:
-    """Internal lanes a connection passes through, in order (split junction lanes included)."""
-    chain = []
-    via = conn.getViaLaneID()
-    for _ in range(16):
-        if not via:
-            return chain
-        lane = net.getLane(via)
-        chain.append(lane)
-        nxt = [c for c in lane.getOutgoing() if c.getTo().getID() == to_edge]
-        nxt = nxt or list(lane.getOutgoing())
-        via = nxt[0].getViaLaneID() if nxt else ""
-    raise NetworkError(f"junction lanes after {conn.getFrom().getID()} do not reach {to_edge}")
-
-
-def _connections(edge: Any, to_edge: str) -> list[Any]:
-    return [c for ln in edge.getLanes() for c in ln.getOutgoing() if c.getTo().getID() == to_edge]
-
-
 def _geo(lane: Any, main: bool) -> _LaneGeo:
     shape = _dedupe(np.asarray(lane.getShape(), dtype=float)[:, :2])
     if len(shape) == 0:
@@ -876,18 +808,18 @@ def _route_lanes(net: Any, route: Sequence[str], periodic: bool, main: bool,
     seen: set[str] = set()
     for k, eid in enumerate(route):
         edge = net.getEdge(eid)
-        for lane in _lanes_of(edge):
+        for lane in lanes_of(edge):
             if lane.getID() not in seen:
                 out.append(_geo(lane, main))
                 seen.add(lane.getID())
         nxt = route[k + 1] if k + 1 < len(route) else (route[0] if periodic else None)
         if nxt is None:
             break
-        conns = _connections(edge, nxt)
+        conns = connections(edge, nxt)
         if not conns:
             raise NetworkError(f"{what} edge {eid!r} is not connected to the next edge {nxt!r}")
         for conn in conns:
-            for lane in _via_chain(net, conn, nxt):
+            for lane in via_chain(net, conn, nxt):
                 if lane.getID() not in seen:
                     out.append(_geo(lane, main))
                     seen.add(lane.getID())
@@ -898,7 +830,7 @@ def _centre_shape(edge: Any, lanes: Sequence[Any] | None = None) -> np.ndarray:
     """Centre line of an edge's lanes as SUMO lays them out: the middle lane's centre (an
     even count: the border between the two middle lanes), (V, 2) m. ``lanes``: only
     these (adjacent) lanes of the edge, e.g. the ones the road continues on."""
-    lanes = list(lanes) if lanes else _lanes_of(edge)
+    lanes = list(lanes) if lanes else lanes_of(edge)
     mid = lanes[len(lanes) // 2]
     shape = _dedupe(np.asarray(mid.getShape(), dtype=float)[:, :2])
     if len(lanes) % 2 == 0:  # the right border of the left middle lane
@@ -910,9 +842,9 @@ def _continuing_lanes(prev: Any, edge: Any) -> list[Any] | None:
     """The lanes of ``edge`` that the lanes of ``prev`` lead onto, right to left, when
     they are not all of them (a lane added beside the road, e.g. an acceleration lane);
     else None."""
-    reached = {c.getToLane().getID() for c in _connections(prev, edge.getID())}
-    lanes = [ln for ln in _lanes_of(edge) if ln.getID() in reached]
-    return lanes if lanes and len(lanes) < len(_lanes_of(edge)) else None
+    reached = {c.getToLane().getID() for c in connections(prev, edge.getID())}
+    lanes = [ln for ln in lanes_of(edge) if ln.getID() in reached]
+    return lanes if lanes and len(lanes) < len(lanes_of(edge)) else None
 
 
 def _reference_line(net: Any, route: Sequence[str], periodic: bool) -> _Line:
@@ -982,12 +914,12 @@ def _raw_shape(edge: Any, centre: np.ndarray) -> np.ndarray:
 def _junction_lanes(net: Any, edge: Any, nxt: Any) -> np.ndarray | None:
     """The junction lanes from ``edge``'s middle lane to ``nxt`` as one polyline, or None
     (no junction lanes)."""
-    conns = _connections(edge, nxt.getID())
+    conns = connections(edge, nxt.getID())
     if not conns:
         return None
-    ref = _reference_lane(edge)
+    ref = reference_lane(edge)
     conn = next((c for c in conns if c.getFromLane() is ref), conns[0])
-    chain = _via_chain(net, conn, nxt.getID())
+    chain = via_chain(net, conn, nxt.getID())
     if not chain:
         return None
     pts = _dedupe(np.concatenate([np.asarray(ln.getShape(), dtype=float)[:, :2]
@@ -1137,13 +1069,13 @@ def _measure(tb: _Tables, net: Any, route: Sequence[str],
     off = 0.0
     for k, eid in enumerate(route):
         edge = net.getEdge(eid)
-        ref = _reference_lane(edge)
+        ref = reference_lane(edge)
         chain = [ref]
         nxt = route[k + 1] if k + 1 < len(route) else (route[0] if periodic else None)
         if nxt is not None:
-            conns = _connections(edge, nxt)
+            conns = connections(edge, nxt)
             conn = next((c for c in conns if c.getFromLane() is ref), conns[0])
-            chain = [conn.getFromLane(), *_via_chain(net, conn, nxt)]
+            chain = [conn.getFromLane(), *via_chain(net, conn, nxt)]
         for lane in chain:
             i = tb.index[lane.getID()]
             lo = np.searchsorted(tb.tab_key, i * _LANE_KEY, side="left")
@@ -1196,124 +1128,6 @@ def _find_parallel(tb: _Tables, chain_off: dict[int, float]) -> None:
     object.__setattr__(tb, "par", par)
     object.__setattr__(tb, "par_s0", s0)
     object.__setattr__(tb, "par_d0", d0)
-
-
-def _centre_on_edge(lane: Any) -> float:
-    """Lateral position (m) of a lane's centre on its edge, from the edge's right side (the
-    lanes of lower index are to the right: SUMO's ``getRightSideOnEdge`` plus half a width)."""
-    edge = lane.getEdge()
-    right = sum(float(ln.getWidth()) for ln in edge.getLanes() if ln.getIndex() < lane.getIndex())
-    return right + 0.5 * float(lane.getWidth())
-
-
-def _link_shift(before: Any, after: Any) -> float:
-    """SUMO's lateral shift (m, added to the lateral lane position) of a vehicle passing from
-    lane ``before`` onto ``after`` (``MSLink``: only where the two shapes do not meet, and
-    only for links through or out of a junction lane; netconvert's junction lanes always
-    meet the lanes they join, so this is 0 on every network netconvert builds).
-
-    Where the shapes do not meet SUMO keeps the vehicle where it is: ``after``'s start lies
-    ``dist`` to the right of ``before``'s end gives ``+dist`` (the vehicle is that much
-    left of the new centre)."""
-    internal = after.getEdge().getFunction() == "internal" or \
-        before.getEdge().getFunction() == "internal"
-    a = np.asarray(before.getShape(), dtype=float)[:, :2]
-    b = np.asarray(after.getShape(), dtype=float)[:, :2]
-    gap = b[0] - a[-1]
-    dist = float(np.hypot(*gap))
-    if not internal or dist == 0.0 or len(a) < 2:
-        return 0.0
-    t = a[-1] - a[-2]
-    n_left = np.array([-t[1], t[0]]) / max(float(np.hypot(*t)), 1e-12)
-    return dist if float(gap @ n_left) < 0.0 else -dist
-
-
-def _lane_coordinates(net: Any, tb: _Tables, route: Sequence[str], periodic: bool,
-                      chain_off: dict[int, float]) -> dict[int, tuple[float, float]]:
-    """SUMO's own lane coordinates of every main-route lane: table key -> ``(s0, d0)`` (m)
-    such that a vehicle at lane position ``pos`` and lateral lane position ``lat`` is at
-    ``s = s0 + pos``, ``d = d0 + lat``.
-
-    SUMO moves a vehicle from lane to lane keeping its lateral lane position (plus
-    :func:`_link_shift`, 0 on netconvert's networks): its collision check, its drivers'
-    view of each other and the lateral bookkeeping of a vehicle's back on the lanes it
-    still occupies all compare lateral lane positions as if the lanes' centres lined up
-    across every joint (MSVehicle, MSLane::detectCollisionBetween). Where a lane's centre
-    moves sideways at a joint (a width change built with netconvert's defaults hangs the
-    narrower lane from the left border), SUMO draws a vehicle that keeps its lateral lane
-    position jumping sideways along the short junction lane between them, at an angle;
-    in SUMO's own coordinates it drives straight. The road frame follows SUMO's
-    coordinates on the main route, so that what the law keeps apart SUMO keeps apart.
-
-    ``d0``: the first edge's lanes are placed across it as SUMO places them (the middle
-    lane's centre, or the border between the two middle lanes, at 0); each connection
-    carries the lateral position from a lane onto its junction lanes and the next edge's
-    lane; the next edge's other lanes are placed across that edge. ``s0``: the measure's
-    chain offsets (SUMO's lane lengths summed); a lane beside the chain starts where its
-    edge's chain lane starts, a junction lane where the lane before it ends.
-    """
-    out: dict[int, tuple[float, float]] = {}
-    idx = tb.index
-    period = tb.measure.s_period if periodic else None
-
-    def put(lane: Any, s0: float, d0: float) -> None:
-        k = idx[lane.getID()]
-        if k not in out:
-            if period is not None:
-                s0 = float(np.mod(s0, period))
-            out[k] = (float(chain_off.get(k, s0)), d0)
-
-    edges = [net.getEdge(e) for e in route]
-    first = _lanes_of(edges[0])
-    mid = first[len(first) // 2]
-    centre = _centre_on_edge(mid) - (0.0 if len(first) % 2 else 0.5 * float(mid.getWidth()))
-    d_edge = {ln.getID(): _centre_on_edge(ln) - centre for ln in first}
-    for k, edge in enumerate(edges):
-        ref = _reference_lane(edge)
-        nxt_id = route[k + 1] if k + 1 < len(route) else (route[0] if periodic else None)
-        conns = _connections(edge, nxt_id) if nxt_id is not None else []
-        main_conn = next((c for c in conns if c.getFromLane() is ref), conns[0]) \
-            if conns else None
-        chain_lane = main_conn.getFromLane() if main_conn is not None else ref
-        s_edge = float(chain_off[idx[chain_lane.getID()]])
-        for ln in _lanes_of(edge):
-            put(ln, s_edge, d_edge[ln.getID()])
-        if main_conn is None:
-            break
-        d_next = None
-        for conn in [main_conn] + [c for c in conns if c is not main_conn]:
-            a = conn.getFromLane()
-            s = out[idx[a.getID()]][0] + float(a.getLength())
-            d = out[idx[a.getID()]][1]
-            prev = a
-            for via in _via_chain(net, conn, nxt_id):
-                d += _link_shift(prev, via)
-                put(via, s, d)
-                s += float(via.getLength())
-                prev = via
-            d += _link_shift(prev, conn.getToLane())
-            if conn is main_conn:
-                d_next = (conn.getToLane(), d)
-        if k + 1 < len(edges):
-            to_lane, d_to = d_next
-            c_to = _centre_on_edge(to_lane)
-            d_edge = {ln.getID(): d_to + _centre_on_edge(ln) - c_to
-                      for ln in _lanes_of(edges[k + 1])}
-    return out
-
-
-def _use_lane_coordinates(tb: _Tables, coords: dict[int, tuple[float, float]],
-                          chain_off: dict[int, float]) -> None:
-    """Map every main-route lane by SUMO's lane coordinates (:func:`_lane_coordinates`):
-    ``s = s0 + pos``, ``d = d0 + lat`` (the parallel path); the other lanes (an on-ramp
-    before it joins the road) keep the projection onto the reference line."""
-    for k, (s0, d0) in coords.items():
-        tb.par[k] = True
-        tb.par_s0[k] = s0
-        tb.par_d0[k] = round(d0, 9)
-    keys = np.array(sorted(chain_off, key=chain_off.get), dtype=np.int64)
-    object.__setattr__(tb, "chain_keys", keys)
-    object.__setattr__(tb, "chain_s0", np.array([chain_off[int(k)] for k in keys]))
 
 
 def _lane_cos(tb: _Tables, k: np.ndarray, pos: np.ndarray) -> np.ndarray:
@@ -1376,8 +1190,8 @@ def _junction_borders(tb: _Tables, lanes: list[_LaneGeo], net: Any, edge: str, n
     ``nxt``: at each ``s`` the outermost borders of the junction lanes there; None when the
     edges join without junction lanes."""
     keys = []
-    for conn in _connections(net.getEdge(edge), nxt):
-        keys += [tb.index[ln.getID()] for ln in _via_chain(net, conn, nxt)
+    for conn in connections(net.getEdge(edge), nxt):
+        keys += [tb.index[ln.getID()] for ln in via_chain(net, conn, nxt)
                  if ln.getID() in tb.index and lanes[tb.index[ln.getID()]].main]
     keys = sorted(set(keys))
     if not keys:
@@ -1447,7 +1261,7 @@ def _profile(tb: _Tables, lanes: list[_LaneGeo], net: Any, route: Sequence[str],
     """The road's edges along ``s``: pieces (s0, right, left) and the edges' spans."""
     s_all, r_all, l_all, spans = [], [], [], []
     for k, eid in enumerate(route):
-        ks = [tb.index[ln.getID()] for ln in _lanes_of(net.getEdge(eid))]
+        ks = [tb.index[ln.getID()] for ln in lanes_of(net.getEdge(eid))]
         s, r, left = _edge_borders(tb, lanes, ks, eid, periodic, length)
         if k and s_all and _continuing_lanes(net.getEdge(route[k - 1]), net.getEdge(eid)):
             # a lane added beside the road (an on-ramp's acceleration lane) is paved from
@@ -1516,7 +1330,7 @@ def load_road_network(
             edges that do not connect, or geometry the frame cannot represent.
     """
     path = Path(net_file)
-    net = _read_sumo_net(path)
+    net = read_sumo_net(path)
     try:
         return _road_network(path, net, kind, main_route, ramp_route, periodic,
                              speed_limit_mps)
@@ -1550,12 +1364,12 @@ def _road_network(path: Path, net: Any, kind: str, main_route: Sequence[str],
     line = _reference_line(net, main_route, periodic)
     index = {g.lane_id: k for k, g in enumerate(lanes)}
     for eid in (*main_route, *(ramp_route or ())):
-        index.setdefault(eid, index[_reference_lane(net.getEdge(eid)).getID()])
+        index.setdefault(eid, index[reference_lane(net.getEdge(eid)).getID()])
     tb = _build_tables(lanes, line, index)
     measure, chain_off = _measure(tb, net, main_route, periodic)
     object.__setattr__(tb, "measure", measure)
     _find_parallel(tb, chain_off)
-    _use_lane_coordinates(tb, _lane_coordinates(net, tb, main_route, periodic, chain_off),
+    use_lane_coordinates(tb, lane_coordinates(net, tb, main_route, periodic, chain_off),
                           chain_off)
     length = measure.s_period if periodic else float(
         measure.to_s(np.array([line.length]))[0])
@@ -1578,12 +1392,12 @@ def _road_network(path: Path, net: Any, kind: str, main_route: Sequence[str],
         ramp_len = 0.0
         for k in range(len(ramp_route) - 1):
             edge = net.getEdge(ramp_route[k])
-            conn = _connections(edge, ramp_route[k + 1])[0]
+            conn = connections(edge, ramp_route[k + 1])[0]
             ramp_len += conn.getFromLane().getLength()
-            ramp_len += sum(ln.getLength() for ln in _via_chain(net, conn, ramp_route[k + 1]))
-        ramp_width = float(sum(ln.getWidth() for ln in _lanes_of(net.getEdge(ramp_route[0]))))
+            ramp_len += sum(ln.getLength() for ln in via_chain(net, conn, ramp_route[k + 1]))
+        ramp_width = float(sum(ln.getWidth() for ln in lanes_of(net.getEdge(ramp_route[0]))))
     if speed_limit_mps is None:
-        speed_limit_mps = float(_reference_lane(net.getEdge(main_route[0])).getSpeed())
+        speed_limit_mps = float(reference_lane(net.getEdge(main_route[0])).getSpeed())
     if not speed_limit_mps > 0:
         raise NetworkError(
             f"network {path.name}: the speed limit of edge {main_route[0]!r} must be > 0 m/s "
@@ -1602,7 +1416,7 @@ def _road_network(path: Path, net: Any, kind: str, main_route: Sequence[str],
         merge_s_m=merge_s,
         ramp_length_m=ramp_len,
         ramp_width_m=ramp_width,
-        n_lanes=len(_lanes_of(net.getEdge(main_route[0]))),
+        n_lanes=len(lanes_of(net.getEdge(main_route[0]))),
         lane_offsets=offsets,
         lane_d=lane_d,
         lane_width={g.lane_id: float(g.width) for g in lanes},
