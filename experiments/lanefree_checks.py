@@ -57,7 +57,6 @@ per CAV share beside TUM), ``lateral_positions.png``, ``top_view_kNNN.png`` and
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from collections.abc import Callable
@@ -67,8 +66,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cosim.cli.errors import run_command
 from cosim.errors import ConfigError
+from experiments import check_cli
 
 #: TUM LaneFreeDrive, ring 1 km x 10.2 m at 225 veh/km: flow (veh/h, loop detectors) per
 #: CAV share (%) of their Potential Lines controller with their human model (TRB 2024
@@ -433,36 +432,9 @@ def report(sweep_dir: Path, smoke: bool) -> int:
     return 0 if n_fail == 0 else 1
 
 
-def cmd(ns: argparse.Namespace) -> int:
-    from cosim.sweeps.execute import run_sweep
-    from cosim.sweeps.plan import sweep_from_dict
-
-    if ns.workers is not None and ns.workers < 1:
-        raise ConfigError(f"--workers must be >= 1 (got {ns.workers})")
-    if ns.out is not None and not ns.out.strip():
-        raise ConfigError("--out must not be empty")
-    out = Path(ns.out or ("outputs/lanefree_checks" + ("_smoke" if ns.smoke else "")))
-    if not ns.evaluate_only:
-        plan = sweep_from_dict(plan_data(ns.smoke))
-        res = run_sweep(plan, out, resume=out.is_dir() and any(out.iterdir()),
-                        workers=ns.workers, progress=not ns.quiet)
-        print(f"{res.n_run} runs in {res.wall_time_s:.0f} s: {res.n_ok} ok, "
-              f"{res.n_failed} failed")
-    elif not (out / "results.csv").is_file():
-        raise ConfigError(f"--evaluate-only: no results.csv in {out}")
-    return report(out, ns.smoke)
-
-
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m experiments.lanefree_checks",
-                                 description=__doc__.split("\n")[0])
-    ap.add_argument("--smoke", action="store_true", help="1 seed, short runs")
-    ap.add_argument("--out", help="output folder (default outputs/lanefree_checks[_smoke])")
-    ap.add_argument("--workers", type=int, help="parallel runs (default: every core)")
-    ap.add_argument("--evaluate-only", action="store_true",
-                    help="judge the runs already in --out, run nothing")
-    ap.add_argument("--quiet", action="store_true", help="no progress bar")
-    return run_command(cmd, ap.parse_args(argv))
+    return check_cli.main(argv, "lanefree_checks", __doc__,
+                          lambda out, smoke: plan_data(smoke), report)
 
 
 if __name__ == "__main__":

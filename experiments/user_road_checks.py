@@ -41,20 +41,18 @@ sublane width is chosen from the road and the obstacle (``scenario.lateral_resol
 * arms with at least 50 % CAVs: no vehicle stands still longer than 30 s, no 30 s window
   without flow while traffic waits (``blocked_windows``); on the obstacle arms no CAV
   stands still longer than 30 s and no window is blocked, and the longest standstill of
-  SUMO's drivers is reported beside that of the same road and seed without CAVs (a SUMO
-  driver alone behind a stopped car, nobody near, stands 25-35 s before it moves out:
-  SL2015's impatience, README "Human drivers").
+  SUMO's drivers is reported beside that of the same road and seed without CAVs (there a
+  SUMO driver alone behind the stopped car stood up to 35 s before it moved out).
 
 Reported beside them: flow (veh/h), the safety layer's edge interventions per CAV-km (the
-law should not lean on it), the harsh-braking share of CAV-steps (comfort), the sublane
-width used. Outputs in ``--out``: the sweep (``results.csv``, ``runs/``), ``checks.csv``,
-``arms.csv``, ``checks.md``; the drawn sources and nets in ``--out`` + ``_nets``. Exit status 0
-when every check passes, 1 when one fails, 2 on a usage error.
+law should not lean on it), the share of CAV-steps with |acceleration| > 3 m/s² (comfort),
+the sublane width used. Outputs in ``--out``: the sweep (``results.csv``, ``runs/``),
+``checks.csv``, ``arms.csv``, ``checks.md``; the drawn sources and nets in ``--out`` +
+``_nets``. Exit status 0 when every check passes, 1 when one fails, 2 on a usage error.
 """
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
 from pathlib import Path
@@ -62,8 +60,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cosim.cli.errors import run_command
 from cosim.errors import ConfigError
+from experiments import check_cli
 from experiments.lanefree_checks import _markdown
 
 SEEDS = (101, 102, 103)
@@ -225,7 +223,7 @@ def evaluate(results: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
             else math.nan,
             "edge_interventions_per_cav_km": float(np.nansum(edge) / np.nansum(cav_km))
             if pct > 0 and np.nansum(cav_km) > 0 else math.nan,
-            "harsh_braking_share_cav": np.nanmean(_num(ok, "harsh_accel_share_cav"))
+            "harsh_accel_share_cav": np.nanmean(_num(ok, "harsh_accel_share_cav"))
             if pct > 0 and len(ok) else math.nan,
             "sublane_m": np.nanmax(_num(ok, "sumo_lateral_resolution_m")) if len(ok)
             else math.nan,
@@ -257,36 +255,9 @@ def report(sweep_dir: Path, smoke: bool) -> int:
     return 0 if failed.empty else 1
 
 
-def cmd(ns: argparse.Namespace) -> int:
-    from cosim.sweeps.execute import run_sweep
-    from cosim.sweeps.plan import sweep_from_dict
-
-    if ns.workers is not None and ns.workers < 1:
-        raise ConfigError(f"--workers must be >= 1 (got {ns.workers})")
-    if ns.out is not None and not ns.out.strip():
-        raise ConfigError("--out must not be empty")
-    out = Path(ns.out or ("outputs/user_road_checks" + ("_smoke" if ns.smoke else "")))
-    if not ns.evaluate_only:
-        plan = sweep_from_dict(plan_data(build_nets(out, ns.smoke), ns.smoke))
-        res = run_sweep(plan, out, resume=(out / "sweep.json").is_file(),
-                        workers=ns.workers, progress=not ns.quiet)
-        print(f"{res.n_run} runs in {res.wall_time_s:.0f} s: {res.n_ok} ok, "
-              f"{res.n_failed} failed")
-    elif not (out / "results.csv").is_file():
-        raise ConfigError(f"--evaluate-only: no results.csv in {out}")
-    return report(out, ns.smoke)
-
-
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m experiments.user_road_checks",
-                                 description=__doc__.split("\n")[0])
-    ap.add_argument("--smoke", action="store_true", help="1 seed, short runs")
-    ap.add_argument("--out", help="output folder (default outputs/user_road_checks[_smoke])")
-    ap.add_argument("--workers", type=int, help="parallel runs (default: every core)")
-    ap.add_argument("--evaluate-only", action="store_true",
-                    help="judge the runs already in --out, run nothing")
-    ap.add_argument("--quiet", action="store_true", help="no progress bar")
-    return run_command(cmd, ap.parse_args(argv))
+    return check_cli.main(argv, "user_road_checks", __doc__,
+                          lambda out, smoke: plan_data(build_nets(out, smoke), smoke), report)
 
 
 if __name__ == "__main__":

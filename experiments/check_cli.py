@@ -1,0 +1,48 @@
+"""The command line every check script shares (``--smoke``, ``--out``, ``--workers``,
+``--evaluate-only``, ``--quiet``): run its sweep (resumable: a second call runs only what
+is missing), then judge the folder. Bad options are one ``error:`` line, exit 2."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+from pathlib import Path
+
+from cosim.cli.errors import run_command
+from cosim.errors import ConfigError
+
+
+def main(argv: list[str] | None, name: str, doc: str,
+         plan_data: Callable[[Path, bool], dict], report: Callable[[Path, bool], int]) -> int:
+    """``python -m experiments.NAME``: ``plan_data(out, smoke)`` gives the sweep
+    (``cosim.sweeps.plan.sweep_from_dict`` input), ``report(out, smoke)`` judges it and
+    returns the exit status (0: every check passed)."""
+    ap = argparse.ArgumentParser(prog=f"python -m experiments.{name}",
+                                 description=doc.split("\n")[0])
+    ap.add_argument("--smoke", action="store_true", help="1 seed, short runs")
+    ap.add_argument("--out", help=f"output folder (default outputs/{name}[_smoke])")
+    ap.add_argument("--workers", type=int, help="parallel runs (default: every core)")
+    ap.add_argument("--evaluate-only", action="store_true",
+                    help="judge the runs already in --out, run nothing")
+    ap.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    def cmd(ns: argparse.Namespace) -> int:
+        from cosim.sweeps.execute import run_sweep
+        from cosim.sweeps.plan import sweep_from_dict
+
+        if ns.workers is not None and ns.workers < 1:
+            raise ConfigError(f"--workers must be >= 1 (got {ns.workers})")
+        if ns.out is not None and not ns.out.strip():
+            raise ConfigError("--out must not be empty")
+        out = Path(ns.out or (f"outputs/{name}" + ("_smoke" if ns.smoke else "")))
+        if not ns.evaluate_only:
+            plan = sweep_from_dict(plan_data(out, ns.smoke))
+            res = run_sweep(plan, out, resume=out.is_dir() and any(out.iterdir()),
+                            workers=ns.workers, progress=not ns.quiet)
+            print(f"{res.n_run} runs in {res.wall_time_s:.0f} s: {res.n_ok} ok, "
+                  f"{res.n_failed} failed")
+        elif not (out / "results.csv").is_file():
+            raise ConfigError(f"--evaluate-only: no results.csv in {out}")
+        return report(out, ns.smoke)
+
+    return run_command(cmd, ap.parse_args(argv))
