@@ -63,11 +63,11 @@ from types import SimpleNamespace  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-import controllers.flocking as fl  # noqa: E402
-from controllers.flocking import OlfatiSaberController  # noqa: E402
+import controllers.plane.olfati_saber as fl  # noqa: E402
 from controllers.observation import Observation  # noqa: E402
-from controllers.params import FlockingParams  # noqa: E402
-from controllers.references import VirtualLeader  # noqa: E402
+from controllers.plane.olfati_saber import OlfatiSaberController  # noqa: E402
+from controllers.plane.params import FlockingParams  # noqa: E402
+from controllers.plane.references import VirtualLeader  # noqa: E402
 from cosim.plane.world import PlaneWorld  # noqa: E402
 
 MIB = 2.0**20
@@ -318,7 +318,7 @@ class _Profiler:
         return wrapper
 
 
-_MODULE_FUNCS = (  # names looked up in controllers.flocking's namespace
+_MODULE_FUNCS = (  # names looked up in controllers.plane.olfati_saber's namespace
     "neighbour_pairs",
     "cross_pairs",
     "scatter_add",

@@ -102,8 +102,8 @@ class RoadProfile:
             out[:, 0] = self.right[0]
             out[:, 1] = self.left[0]
             return out
-        if s.ndim == 1 and s.dtype == np.float64:  # compiled (controllers.profile_kernels)
-            from controllers import profile_kernels as PK  # numba: imported when first used
+        if s.ndim == 1 and s.dtype == np.float64:  # compiled (controllers.road.profile_kernels)
+            from controllers.road import profile_kernels as PK  # numba: imported when first used
 
             return PK.edges_at(s, self.s0, self.right, self.left, self.periodic,
                                float(self.length_m))
@@ -125,8 +125,8 @@ class RoadProfile:
         if self.is_constant:
             return self.edges(s)
         ahead = np.broadcast_to(np.asarray(ahead_m, dtype=float), s.shape)
-        if s.ndim == 1:  # compiled (controllers.profile_kernels)
-            from controllers import profile_kernels as PK
+        if s.ndim == 1:  # compiled (controllers.road.profile_kernels)
+            from controllers.road import profile_kernels as PK
 
             return PK.narrowest_over(s, np.ascontiguousarray(ahead), self.s0, self.right,
                                      self.left, self.periodic, float(self.length_m))

@@ -39,7 +39,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-from .observation import Observation
+from controllers.observation import Observation
 
 
 @runtime_checkable

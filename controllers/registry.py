@@ -29,8 +29,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from .constraints import ActuatorLimits
-from .observation import RoadProfile
+from controllers.layers.constraints import ActuatorLimits
+from controllers.observation import RoadProfile
 
 
 class LawError(ValueError):
@@ -237,7 +237,7 @@ def _user_params(e: LawEntry, values: Mapping[str, Any]) -> dict:
 def _with_comm(law: Any, ctx: RoadContext) -> Any:
     if ctx.comm is None:
         return law
-    from .communication import CommunicatingController
+    from controllers.comm import CommunicatingController
 
     return CommunicatingController(law, ctx.comm)
 
@@ -251,7 +251,7 @@ def _load_builtins() -> None:
     if _LOADED:
         return
     _LOADED = True
-    from .road import boundary_points, formation, lanefree, timegap_flocking, vicsek
+    from controllers.road import boundary_points, formation, lanefree, timegap_flocking, vicsek
 
     register(LawEntry(
         kind="flocking",

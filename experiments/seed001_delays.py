@@ -59,9 +59,9 @@ import pandas as pd  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from controllers.communication import CommConfig, CommunicatingController  # noqa: E402
-from controllers.constraints import ConstrainedController  # noqa: E402
-from controllers.references import WaypointSequence  # noqa: E402
+from controllers.comm import CommConfig, CommunicatingController  # noqa: E402
+from controllers.layers.constraints import ConstrainedController  # noqa: E402
+from controllers.plane.references import WaypointSequence  # noqa: E402
 from cosim.plane.scenarios import seed001_world
 from cosim.plane.world import PlaneWorld
 

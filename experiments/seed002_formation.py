@@ -11,7 +11,7 @@ Writes to ``--out`` (default ``outputs/seed002``):
 * ``hexagon_trajectories.png`` (fixed camera and camera on the centroid, as the seed's
   animations) and ``hexagon_error.png`` (distance error vs time);
 * ``kfor_sweep.csv``: one row per (K_for, start) with the oscillation measures of
-  :func:`controllers.formation.oscillation_metrics` and the linearised damping ratio;
+  :func:`controllers.plane.formation.oscillation_metrics` and the linearised damping ratio;
   ``kfor_sweep_summary.csv`` and ``kfor_sweep.png``; the summary is printed;
 * ``road_grid.csv`` / ``road_grid.png``: two rows of three CAVs travelling at the
   virtual leader's 25 m/s while restoring their shape.
@@ -38,7 +38,7 @@ import pandas as pd  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from controllers.formation import (  # noqa: E402
+from controllers.plane.formation import (  # noqa: E402
     FormationController,
     FormationGraph,
     FormationParams,

@@ -88,13 +88,12 @@ from scipy.spatial import cKDTree  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from controllers.boundary_points import (  # noqa: E402
+from controllers.layers.constraints import ConstrainedController, SpeedSaturation  # noqa: E402
+from controllers.plane.boundary_points import (  # noqa: E402
     BoundaryPointController,
     BoundaryPointParams,
 )
-from controllers.constraints import ConstrainedController, SpeedSaturation  # noqa: E402
-from controllers.flocking import OlfatiSaberController  # noqa: E402
-from controllers.obstacles import (  # noqa: E402
+from controllers.plane.obstacles import (  # noqa: E402
     Circle,
     ObstacleSet,
     Polygon,
@@ -102,8 +101,9 @@ from controllers.obstacles import (  # noqa: E402
     c_shape,
     diamond,
 )
-from controllers.params import FlockingParams  # noqa: E402
-from controllers.references import VirtualLeader  # noqa: E402
+from controllers.plane.olfati_saber import OlfatiSaberController  # noqa: E402
+from controllers.plane.params import FlockingParams  # noqa: E402
+from controllers.plane.references import VirtualLeader  # noqa: E402
 from cosim.plane.world import PlaneWorld
 
 TABLE3 = BoundaryPointParams()

@@ -39,7 +39,7 @@ import pandas as pd  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from controllers.vicsek import VicsekModel, VicsekParams  # noqa: E402
+from controllers.plane.vicsek import VicsekModel, VicsekParams  # noqa: E402
 
 METRICS = (
     "order_parameter",

@@ -224,7 +224,7 @@ def _float_paths() -> list[tuple[str, object, object]]:
     """(dotted path, default, type hint) of every float-holding parameter: the sections,
     the default law's parameters and the communication layer."""
     from controllers import registry
-    from controllers.communication import CommConfig
+    from controllers.comm import CommConfig
     from cosim.config.scenario import SECTIONS
     from cosim.config.sections import ControllerSpec
 

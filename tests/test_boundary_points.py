@@ -1,4 +1,4 @@
-"""Seed 003 boundary-point flocking (controllers/boundary_points.py, controllers/obstacles.py).
+"""Seed 003 boundary-point flocking (controllers/plane/boundary_points.py, obstacles.py).
 
 Hand-made configurations for the weights, the sampling and the phase
 comparison; a loop reference for the vectorised terms; the split/rejoin
@@ -16,7 +16,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controllers.boundary_points import (
+from controllers.layers.constraints import ConstrainedController, SpeedSaturation
+from controllers.observation import Observation
+from controllers.plane.boundary_points import (
     A1,
     A2,
     A3,
@@ -30,9 +32,7 @@ from controllers.boundary_points import (
     goal_blocking,
     phase_choice,
 )
-from controllers.constraints import ConstrainedController, SpeedSaturation
-from controllers.observation import Observation
-from controllers.obstacles import (
+from controllers.plane.obstacles import (
     Circle,
     ObstacleSet,
     Polygon,
@@ -43,7 +43,7 @@ from controllers.obstacles import (
     sample_segment,
     sense,
 )
-from controllers.olfati_saber import (
+from controllers.plane.potentials import (
     adjacency,
     phi_alpha,
     sigma_grad,

@@ -1,4 +1,4 @@
-"""Communication layer (controllers/communication.py): delays, loss, expiry, clocks, seed 001.
+"""Communication layer (controllers/comm/): delays, loss, expiry, clocks, seed 001.
 
 The seed 001 mission test uses experiments/seed001_delays.py's world (seed 1, r_comm = 8.4 m,
 |p| <= 10 m/s, |u| <= 5 m/s^2, waypoints (150,150), (300,150), (300,300), (150,300)).
@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controllers.communication import CommConfig, CommunicatingController
-from controllers.flocking import OlfatiSaberController
+from controllers.comm import CommConfig, CommunicatingController
 from controllers.observation import Observation
+from controllers.plane.olfati_saber import OlfatiSaberController
 from cosim.plane.scenarios import seed001_params, seed001_world
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,19 +1,20 @@
-"""Constraint layers (controllers/constraints.py): speed saturation, acceleration box, jerk."""
+"""Constraint layers (controllers/layers/constraints.py): saturation, acceleration box, jerk."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from controllers.constraints import (
+from controllers.errors import ParameterError
+from controllers.layers.constraints import (
     AccelerationBox,
     ConstrainedController,
     JerkLimit,
     SpeedSaturation,
 )
-from controllers.flocking import OlfatiSaberController
 from controllers.observation import InvalidStateError, Observation
-from controllers.params import FlockingParams, ParameterError
+from controllers.plane.olfati_saber import OlfatiSaberController
+from controllers.plane.params import FlockingParams
 from cosim.plane.world import PlaneWorld
 
 # Rounding slack: p + ((sat - p) / dt) * dt reproduces sat to a few ulps of 10 m/s.

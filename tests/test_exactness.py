@@ -46,13 +46,13 @@ def _close(got: np.ndarray, want: np.ndarray, rel: float, abs_: float) -> tuple[
 
 
 def _limits(name: str):
-    from controllers.constraints import ActuatorLimits
+    from controllers.layers.constraints import ActuatorLimits
 
     return ActuatorLimits(**json.loads(str(LAW[f"{name}/limits"])))
 
 
 def _safety(name: str):
-    from controllers.safety import SafetyParams
+    from controllers.layers.safety import SafetyParams
 
     return SafetyParams(**json.loads(str(LAW[f"{name}/safety"])))
 

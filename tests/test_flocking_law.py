@@ -1,4 +1,4 @@
-"""The flocking law (controllers/flocking.py): alpha, beta, wall and gamma terms.
+"""The flocking law (controllers/plane/olfati_saber.py): alpha, beta, wall and gamma terms.
 
 Numbers refer to the default parameters (seed 000 CONSTANTS.m): d = 6 m, r = 7.2 m,
 eps = 0.1, a = b = 5, h_alpha = 0.2, h_beta = 0.9, d' = 12 m, d'' = 3 m,
@@ -13,11 +13,12 @@ import math
 import numpy as np
 import pytest
 
-from controllers.energy import flock_energy
-from controllers.flocking import OlfatiSaberController
+from controllers.errors import ParameterError
 from controllers.observation import Circles, InvalidStateError, Observation, Walls
-from controllers.params import FlockingParams, ParameterError
-from controllers.references import VirtualLeader
+from controllers.plane.energy import flock_energy
+from controllers.plane.olfati_saber import OlfatiSaberController
+from controllers.plane.params import FlockingParams
+from controllers.plane.references import VirtualLeader
 from cosim.plane.world import PlaneWorld
 
 NO_GAMMA = {"c1_gamma": 0.0, "c2_gamma": 0.0}
@@ -150,7 +151,7 @@ def test_anisotropic_pairs_settle_at_d_long_along_and_d_lat_across_the_road():
 
 def test_anisotropic_force_is_the_gradient_of_the_scaled_potential():
     # U(q) = c1 psi_alpha(||S (q1 - q0)||_sigma); u_0 = -dU/dq_0 by finite differences.
-    from controllers.olfati_saber import psi_alpha, sigma_norm
+    from controllers.plane.potentials import psi_alpha, sigma_norm
 
     prm = FlockingParams(d_long=10.0, d_lat=4.0, **NO_GAMMA)
     law = OlfatiSaberController(prm)

@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controllers.formation import (
+from controllers.observation import Observation
+from controllers.plane.formation import (
     FormationController,
     FormationGraph,
     FormationParams,
@@ -21,7 +22,6 @@ from controllers.formation import (
     signed_distance_errors,
     stiffness_matrix,
 )
-from controllers.observation import Observation
 
 SIDE = 10.0  # m, hexagon side used throughout (the seed's pixels have no SI scale)
 

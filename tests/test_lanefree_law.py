@@ -14,8 +14,8 @@ import dataclasses
 import numpy as np
 import pytest
 
+from controllers.errors import ParameterError
 from controllers.observation import Observation, RoadProfile
-from controllers.params import ParameterError
 from controllers.registry import RoadContext
 from controllers.road.lanefree import LaneFreeFlocking, LaneFreeParams
 from cosim.config import load_scenario

@@ -20,8 +20,8 @@ import time
 import numpy as np
 import pytest
 
-from controllers.constraints import ActuatorLimits
-from controllers.safety import SafetyConfig, SafetyLayer
+from controllers.layers.constraints import ActuatorLimits
+from controllers.layers.safety import SafetyConfig, SafetyLayer
 from cosim.config.scenario import load_scenario
 from cosim.demand.plan import DemandPlan, _Vehicle
 from cosim.demand.spec import HDV_TAU_S, MIN_GAP_M

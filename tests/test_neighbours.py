@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controllers.flocking import OlfatiSaberController
 from controllers.neighbours import (
     cross_pairs,
     neighbour_pairs,
@@ -15,7 +14,8 @@ from controllers.neighbours import (
     strip_cross_pairs,
 )
 from controllers.observation import Observation
-from controllers.params import FlockingParams
+from controllers.plane.olfati_saber import OlfatiSaberController
+from controllers.plane.params import FlockingParams
 
 
 def brute_force_pairs(x, radius, period=None):

@@ -1,5 +1,5 @@
 """The road profile's compiled look-ups (``RoadProfile.edges`` and ``narrowest``,
-:mod:`controllers.profile_kernels`) give exactly what the numpy code before them gave
+:mod:`controllers.road.profile_kernels`) give exactly what the numpy code before them gave
 (issue 15). ``ref_edges`` and ``ref_narrowest`` are verbatim copies of the methods before
 the change (only the names changed); states: straight and periodic profiles of 2 to 40
 pieces, positions exactly on piece starts, before the first and past the road's end, NaN,
@@ -93,7 +93,7 @@ def ref_wall_gap(road, q, width, length, reach_m):
 
 @pytest.mark.parametrize("periodic", [False, True])
 def test_compiled_wall_gap_matches_the_numpy_one(periodic):
-    from controllers.profile_kernels import first_wall_ahead
+    from controllers.road.profile_kernels import first_wall_ahead
     from cosim.sim.loop import WALL_REACH_M
 
     rng = np.random.default_rng(9 + periodic)

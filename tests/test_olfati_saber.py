@@ -1,4 +1,4 @@
-"""Olfati-Saber building blocks (controllers/olfati_saber.py) against hand values.
+"""Olfati-Saber building blocks (controllers/plane/potentials.py) against hand values.
 
 Hand values use epsilon = 1 or 0.5 where the sigma-norm has a closed form:
 ``||z||_sigma = (sqrt(1 + eps ||z||^2) - 1) / eps``.
@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from controllers.olfati_saber import (
+from controllers.plane.potentials import (
     adjacency,
     n_ij,
     phi,

@@ -9,10 +9,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from controllers.flocking import OlfatiSaberController
 from controllers.observation import Circles, InvalidStateError, Walls
-from controllers.params import FlockingParams
-from controllers.references import VirtualLeader
+from controllers.plane.olfati_saber import OlfatiSaberController
+from controllers.plane.params import FlockingParams
+from controllers.plane.references import VirtualLeader
 from cosim.metrics.flock import (
     average_nn_distance,
     connectivity,

@@ -16,7 +16,7 @@ def loaded_in_child() -> dict:
 
     mods = ("cosim.sim.preload", "cosim.sumo.world", "libsumo")
     out = {m: m in sys.modules for m in mods}
-    from controllers import safety_kernels
+    from controllers.layers import safety_kernels
     from controllers.road.lanefree import kernels as law_kernels
     from cosim.metrics import kernels as metric_kernels
 

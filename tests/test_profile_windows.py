@@ -1,5 +1,5 @@
 """The road profile's kernels look at each vehicle's stretch ahead only (bisection of the
-pieces' starts, :func:`controllers.profile_kernels.ahead_windows`) instead of every
+pieces' starts, :func:`controllers.road.profile_kernels.ahead_windows`) instead of every
 piece: on long roads of hundreds of pieces (a 50 km ring's profile has ~500) they must
 still give the numpy references' bits (the verbatim copies of the code before the
 kernels, in tests/test_observation_profile.py and tests/test_law_narrowing_exactness.py).
@@ -15,9 +15,9 @@ from test_law_narrowing_exactness import old_narrowing
 from test_observation_profile import ref_narrowest, ref_wall_gap
 
 from controllers.observation import Observation, RoadProfile
-from controllers.profile_kernels import _MAX_WINDOWS, ahead_windows, first_wall_ahead
 from controllers.road.lanefree import LaneFreeFlocking, LaneFreeParams
 from controllers.road.lanefree.law import _Scene
+from controllers.road.profile_kernels import _MAX_WINDOWS, ahead_windows, first_wall_ahead
 
 
 def _long_profile(rng, k: int, periodic: bool) -> RoadProfile:

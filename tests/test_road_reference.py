@@ -1,11 +1,11 @@
-"""Time-gap reference speed and leader search (controllers/road_reference.py)."""
+"""Time-gap reference speed and leader search (controllers/road/reference.py)."""
 
 import math
 
 import numpy as np
 import pytest
 
-from controllers.road_reference import leader_gaps, reference_reach_m, time_gap_speed
+from controllers.road.reference import leader_gaps, reference_reach_m, time_gap_speed
 
 
 def test_time_gap_speed_is_gap_minus_standstill_over_time_gap_capped_by_desire():

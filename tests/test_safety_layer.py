@@ -1,4 +1,4 @@
-"""controllers/safety.py without SUMO: the safe-speed, side-clearance and road-edge rules.
+"""controllers/layers/safety.py without SUMO: the safe-speed, side-clearance and road-edge rules.
 
 Defaults: dt = 0.1 s, one reaction step (tau = 0.1 s), min gap 2 m, lateral clearance
 0.3 m, edge margin 0.1 m, own and leader deceleration 9 m/s^2, lateral acceleration and
@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from controllers.safety import RoadState, SafetyConfig, SafetyCounts, SafetyLayer
+from controllers.layers.safety import RoadState, SafetyConfig, SafetyCounts, SafetyLayer
 
 DT = 0.1
 L, W = 4.5, 1.8

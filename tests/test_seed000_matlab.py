@@ -4,10 +4,10 @@ The reference below is a line-by-line numpy transcription of the appendix of see
 (/work/shared/seeds/000_*.txt): CONSTANTS.m (parameters, obstacle, road boundaries), the
 helper functions (``sigma_normF`` ... ``euclidean_dist``, same names and argument lists) and
 one pass of main.m's loop over the agents plus its Euler update. It imports nothing from
-controllers/ (in particular neither controllers.flocking nor controllers.olfati_saber); the
+controllers/ (neither controllers.plane.olfati_saber nor controllers.plane.potentials); the
 controller under test is the one ``cosim.plane.scenarios.seed000_world`` builds.
 
-The reference is corrected only for the two slips documented in controllers/flocking.py
+The reference is corrected only for the two slips documented in controllers/plane/olfati_saber.py
 (``corrected=True``, the default; ``corrected=False`` runs the script as printed):
 
 1. running sums: main.m adds the running sum ``phia_nij`` (and ``phib_nij``, ``phic_nij``)

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controllers.constraints import ConstrainedController, SpeedSaturation
+from controllers.layers.constraints import ConstrainedController, SpeedSaturation
 from cosim.plane.scenarios import (
     SCENARIOS,
     run_plane_scenario,

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from controllers.observation import Observation
-from controllers.vicsek import (
+from controllers.plane.vicsek import (
     VicsekAlignmentController,
     VicsekModel,
     VicsekParams,

@@ -10,6 +10,8 @@ road edges, desired speeds) and keeps the law's road-specific glue with the law:
                          boundary points
     formation.py         ``formation``: seed 002's rigid formations of CAV groups
     vicsek.py            ``vicsek``: seed 004's alignment with desired-speed tracking
+    reference.py         the per-vehicle gamma reference: desired speed under a time gap
+    profile_kernels.py   compiled look-ups of the road's piecewise-constant edges
 
 :mod:`controllers.registry` maps the kinds to these classes and their parameters.
 """

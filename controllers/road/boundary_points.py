@@ -1,11 +1,11 @@
 """``boundary_points``: seed 003's boundary-point law driving CAVs on the road.
 
-The plane-world law (:mod:`controllers.boundary_points`) sees obstacles as boundary
+The plane-world law (:mod:`controllers.plane.boundary_points`) sees obstacles as boundary
 points. On the road, the sensed vehicles (human drivers, a stopped vehicle) are
 sampled as boundary points on their perimeters every ``BP_SPACING_M``, moving with
 them; the gamma-agent is placed ``BP_GOAL_AHEAD_M`` ahead of each CAV in its own
 lateral position and moves at the time-gap reference speed
-(:func:`controllers.road_reference.time_gap_reference`). Then the run's actuator
+(:func:`controllers.road.reference.time_gap_reference`). Then the run's actuator
 box and jerk limit, and a lateral damping ``u_lat -= c_d v_lat`` (clipped).
 
 A stopped car is a local minimum of seed 003's potential field on a road: the gamma-agent
@@ -27,11 +27,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.boundary_points import BoundaryPointController, BoundaryPointParams
-from controllers.constraints import ConstrainedController
+from controllers.errors import ParameterError
+from controllers.layers.constraints import ConstrainedController
 from controllers.observation import Observation
-from controllers.params import ParameterError
-from controllers.road_reference import time_gap_reference
+from controllers.plane.boundary_points import BoundaryPointController, BoundaryPointParams
+from controllers.road.reference import time_gap_reference
 
 BP_GOAL_AHEAD_M = 50.0  # m: seed 003's gamma-agent placed this far ahead of each CAV
 BP_SPACING_M = 1.0  # m: spacing of boundary points on vehicle perimeters
@@ -44,11 +44,11 @@ C_NAV = 1.2  # 1/s: its damping
 class RoadBoundaryPointParams(BoundaryPointParams):
     """Seed 003 parameters plus the road reference (SI units).
 
-    Attributes (beyond :class:`~controllers.boundary_points.BoundaryPointParams`;
+    Attributes (beyond :class:`~controllers.plane.boundary_points.BoundaryPointParams`;
     ``dt`` is the run's step):
         time_gap_s, standstill_gap_m, reference_decel_mps2, lateral_margin_m: the
             time-gap reference speed of the gamma-agent (see
-            :func:`controllers.road_reference.time_gap_speed`), s, m, m/s^2, m.
+            :func:`controllers.road.reference.time_gap_speed`), s, m, m/s^2, m.
         lateral_damping: gain pulling the lateral speed to zero, 1/s.
     """
 

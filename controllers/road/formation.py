@@ -7,7 +7,7 @@ the shape: members sorted along the road take the slots sorted along the road, a
 members level with each other take the slots level with each other from left to right
 (so nobody has to overtake a groupmate to reach its slot). A complete group then holds
 its shape by seed 002's distance potential with velocity consensus
-(:mod:`controllers.formation`) and tracks a reference::
+(:mod:`controllers.plane.formation`) and tracks a reference::
 
     u_i = sum_j sat(K_for (|q_j - q_i|^2 / delta_ij^2 - 1) (q_j - q_i))  formation (m/s^2)
           + K_vel sum_j (p_j - p_i)                                   velocity consensus
@@ -63,9 +63,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.formation import grid_formation, hexagon_formation
+from controllers.errors import ParameterError
 from controllers.observation import Observation
-from controllers.params import ParameterError
+from controllers.plane.formation import grid_formation, hexagon_formation
 
 SHAPES = ("hexagon", "block")
 

@@ -5,9 +5,10 @@ law (``controller.kind = "flocking_timegap"``). Each step:
 
 1. reference: the desired speed of CAV i bounded by a constant time-gap policy and a
    closing-speed bound to its leader, the nearest vehicle ahead that overlaps it
-   laterally (``controllers.road_reference``):
+   laterally (``controllers.road.reference``):
    ``v_ref = min(v_des, (g - s0) / T, sqrt(v_l^2 + 2 b (g - s0)))``;
-2. ``u = u_alpha + u_beta + u_gamma`` with ``p_gamma = (v_ref, 0)`` (``controllers.flocking``);
+2. ``u = u_alpha + u_beta + u_gamma`` with ``p_gamma = (v_ref, 0)``
+   (``controllers.plane.olfati_saber``);
 3. the actuator box (and jerk limit) of the run;
 4. lateral damping ``u_lat -= c_d v_lat``, clipped to the lateral limit.
 
@@ -21,18 +22,19 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.constraints import AccelerationBox, ConstrainedController, JerkLimit
-from controllers.flocking import OlfatiSaberController
+from controllers.errors import ParameterError
+from controllers.layers.constraints import AccelerationBox, ConstrainedController, JerkLimit
 from controllers.observation import Observation
-from controllers.params import FlockingParams, ParameterError
-from controllers.road_reference import time_gap_reference
+from controllers.plane.olfati_saber import OlfatiSaberController
+from controllers.plane.params import FlockingParams
+from controllers.road.reference import time_gap_reference
 
 
 @dataclass(frozen=True)
 class TimeGapFlockingParams(FlockingParams):
     """FlockingParams plus the time-gap reference and lateral damping (SI units).
 
-    Attributes (beyond :class:`~controllers.params.FlockingParams`):
+    Attributes (beyond :class:`~controllers.plane.params.FlockingParams`):
         time_gap_s: time gap T of the reference ``min(v_des, (g - s0)/T)``, s; 0 tracks
             the desired speed only.
         standstill_gap_m: standstill gap s0, m.

@@ -1,7 +1,7 @@
 """``vicsek``: seed 004's velocity alignment driving CAVs on the road.
 
 ``u_i = k_align (mean_{j in N_i} p_j - p_i) + k_v (v_des_i - v_i) e_s`` with ``N_i`` the
-other CAVs within ``radius_m`` (controllers.vicsek.VicsekAlignmentController) and a
+other CAVs within ``radius_m`` (controllers.plane.vicsek.VicsekAlignmentController) and a
 desired-speed term along the road (``k_v = 0`` gives pure alignment, which only keeps
 the flock's mean velocity). No spacing and no collision avoidance of its own: the
 safety layer keeps it apart and on the road (its interventions are counted).
@@ -13,9 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from controllers.errors import ParameterError
 from controllers.observation import Observation
-from controllers.params import ParameterError
-from controllers.vicsek import VicsekAlignmentController
+from controllers.plane.vicsek import VicsekAlignmentController
 
 
 @dataclass(frozen=True)

@@ -10,8 +10,8 @@ Unknown sections or keys, wrong types, non-finite numbers and impossible values 
     [demand]            DemandSpec (cosim.demand.spec)
     [controller]        kind; [controller.params] the law's own parameters;
                         [controller.comm] seed 001's communication layer
-    [limits]            ActuatorLimits (controllers.constraints)
-    [safety]            SafetyParams (controllers.safety)
+    [limits]            ActuatorLimits (controllers.layers.constraints)
+    [safety]            SafetyParams (controllers.layers.safety)
     [obstacle]          ObstacleSpec (cosim.config.sections)
     [outputs]           OutputSpec (cosim.config.sections)
 
@@ -30,8 +30,8 @@ from pathlib import Path
 from typing import Any
 
 from controllers import registry
-from controllers.constraints import ActuatorLimits
-from controllers.safety import SafetyParams
+from controllers.layers.constraints import ActuatorLimits
+from controllers.layers.safety import SafetyParams
 from cosim.config.builtins import builtin_scenarios
 from cosim.config.overrides import apply_overrides
 from cosim.config.schema import field_names, from_table, plain
@@ -230,7 +230,7 @@ def check_parameter_path(path: str, kind: str | None = None) -> None:
             )
         return
     if parts[:2] == ["controller", "comm"]:
-        from controllers.communication import CommConfig
+        from controllers.comm import CommConfig
 
         known = field_names(CommConfig)
         if len(parts) != 3 or parts[2] not in known:

@@ -10,7 +10,7 @@ dataclass's own validation runs:
   for a float;
 * **every float must be finite** (NaN and +-inf are refused with the key's name);
 * the dataclass's own ``ValueError``/``TypeError`` (including
-  :class:`controllers.params.ParameterError`) becomes one :class:`ConfigError` line
+  :class:`controllers.errors.ParameterError`) becomes one :class:`ConfigError` line
   prefixed with the section.
 
 All errors are :class:`~cosim.errors.ConfigError`: one line, naming ``section.key``.

@@ -3,10 +3,10 @@
 The other sections are their components' own parameter classes (one source of truth):
 ``[network]`` :class:`cosim.road.spec.NetworkSpec`, ``[demand]``
 :class:`cosim.demand.spec.DemandSpec`, ``[limits]``
-:class:`controllers.constraints.ActuatorLimits`, ``[safety]``
-:class:`controllers.safety.SafetyParams`, ``[controller.params]`` the law's own
+:class:`controllers.layers.constraints.ActuatorLimits`, ``[safety]``
+:class:`controllers.layers.safety.SafetyParams`, ``[controller.params]`` the law's own
 parameter class (:mod:`controllers.registry`), ``[controller.comm]``
-:class:`controllers.communication.CommConfig`.
+:class:`controllers.comm.CommConfig`.
 """
 
 from __future__ import annotations
@@ -174,7 +174,7 @@ class ControllerSpec:
         params: [controller.params]: the law's parameters (its own dataclass; unknown keys
             are refused with the valid ones listed). Written out fully resolved.
         comm: [controller.comm]: seed 001's communication layer
-            (:class:`controllers.communication.CommConfig`): each CAV acts on received,
+            (:class:`controllers.comm.CommConfig`): each CAV acts on received,
             delayed or lost messages of the others. Empty: ideal.
     """
 
@@ -222,7 +222,7 @@ class ControllerSpec:
         """The validated CommConfig, or None when [controller.comm] is empty."""
         if not self.comm:
             return None
-        from controllers.communication import CommConfig
+        from controllers.comm import CommConfig
 
         known = {f.name for f in fields(CommConfig)}
         for key in self.comm:

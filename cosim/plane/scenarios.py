@@ -11,11 +11,11 @@ import math
 
 import numpy as np
 
-from controllers.constraints import AccelerationBox, ConstrainedController, SpeedSaturation
-from controllers.flocking import OlfatiSaberController
+from controllers.layers.constraints import AccelerationBox, ConstrainedController, SpeedSaturation
 from controllers.observation import Circles, Walls
-from controllers.params import FlockingParams
-from controllers.references import VirtualLeader
+from controllers.plane.olfati_saber import OlfatiSaberController
+from controllers.plane.params import FlockingParams
+from controllers.plane.references import VirtualLeader
 from cosim.plane.world import PlaneResult, PlaneWorld
 
 

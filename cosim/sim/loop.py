@@ -32,10 +32,10 @@ from typing import Any
 import numpy as np
 
 from controllers import protocol
-from controllers.constraints import ActuatorLimits, Layer
+from controllers.layers.constraints import ActuatorLimits, Layer
+from controllers.layers.safety import RoadState, SafetyLayer
 from controllers.observation import Observation
-from controllers.profile_kernels import first_wall_ahead
-from controllers.safety import RoadState, SafetyLayer
+from controllers.road.profile_kernels import first_wall_ahead
 from cosim.errors import CosimError
 from cosim.sim.kernels import cav_columns, integrate
 from cosim.sim.world import RoadSnapshot, World

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from controllers.road_reference import leader_gaps
+from controllers.road.reference import leader_gaps
 from cosim.demand.plan import DemandPlan
 from cosim.demand.spec import (
     ACCEL_MPS2,

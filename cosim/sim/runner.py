@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from controllers import protocol, registry
-from controllers.safety import SafetyConfig, SafetyLayer
+from controllers.layers.safety import SafetyConfig, SafetyLayer
 from cosim.config.checks import check_against_network
 from cosim.config.scenario import Scenario
 from cosim.errors import ConfigError, CosimError, SumoStartError
@@ -246,7 +246,7 @@ def _run_in(sc: Scenario, work: Path, gui: bool, progress, hooks) -> RunResult:
     if run.world == "road" or not sc.outputs.sumo_collisions:  # not checked: missing, not 0
         for key in ("collisions_sumo_cav", "collisions_sumo_hdv_only"):
             summary[key] = None
-    from controllers.safety import SafetyCounts
+    from controllers.layers.safety import SafetyCounts
 
     counts = safety.counts if safety is not None else SafetyCounts()
     summary.update(counts.as_dict())

@@ -198,7 +198,7 @@ def observation(step: dict):
 
 def road_state(step: dict):
     """The safety layer's RoadState of a stored step (the loop's row order)."""
-    from controllers.safety import RoadState
+    from controllers.layers.safety import RoadState
 
     n_all = len(step["cav_pos"]) + len(step["other_pos"])
     out = {}
@@ -245,7 +245,7 @@ def replay_safety(steps: list[dict], limits, safety, dt,
                   harsh_cmd: bool = False) -> tuple[list, list, dict]:
     """The safety layer on every stored step (one layer, counts accumulate); with
     ``harsh_cmd`` on :func:`harsh` commands."""
-    from controllers.safety import SafetyConfig, SafetyLayer
+    from controllers.layers.safety import SafetyConfig, SafetyLayer
 
     layer = SafetyLayer(SafetyConfig.for_run(safety, dt, limits))
     us, vls = [], []

@@ -19,7 +19,7 @@ import math
 import numpy as np
 from numba import njit
 
-from controllers import profile_kernels as PK
+from controllers.road import profile_kernels as PK
 
 # ------------------------------------------------------------------ scalar parameters
 #: Names of the scalars in ``P`` (see :func:`pack`), in order.
@@ -163,7 +163,7 @@ def window(s, d, n, order, rank, k_side, periodic, period):
 @njit(cache=True)
 def leader_gaps(s, d, length, width, rows, reach_m, periodic, period, lateral_margin_m, v,
                 order, rank):
-    """:func:`controllers.road_reference.leader_gaps` with ``v``: (gap (R,) m, v_leader (R,)
+    """:func:`controllers.road.reference.leader_gaps` with ``v``: (gap (R,) m, v_leader (R,)
     m/s; inf / nan where none), visiting the vehicles ahead in the same blocks."""
     n, m = rows.shape[0], s.shape[0]
     gap = np.full(n, np.inf)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from controllers.params import ParameterError
+from controllers.errors import ParameterError
 
 
 @dataclass(frozen=True)

@@ -95,174 +95,18 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from .neighbours import cross_pairs
-from .observation import Circles, Observation
-from .params import ParameterError
+from controllers.comm.config import CommConfig, CommStats
+from controllers.comm.messages import Clocks, Messages
+from controllers.comm.views import Views
+from controllers.errors import ParameterError
+from controllers.neighbours import cross_pairs
+from controllers.observation import Observation
 
-MODES = ("synchronous", "asynchronous")
 _DENSE_SEND_MAX = 20_000  # sender x agent pairs below which sending uses a dense table
 BATCHING = ("auto", "union", "loop")
-
-
-@dataclass(frozen=True)
-class CommConfig:
-    """Communication model parameters, validated on construction (``ValueError`` names the field).
-
-    Attributes:
-        r_comm_m: communication (sensing) radius, m, > 0 (``math.inf``: everyone).
-        delay_min_s, delay_max_s: delay bounds, s, ``0 <= delay_min_s <= delay_max_s``.
-        loss_prob: probability that one (sender, receiver) copy is lost, in [0, 1).
-        period_s: update (broadcast and control) period T, s, > 0.
-        expiry_s: a buffered message is dropped when older than this, s, > 0.
-        mode: "synchronous" (common clock) or "asynchronous" (own clock per agent).
-        period_jitter: asynchronous only: each agent's period is
-            ``period_s (1 + period_jitter U(-1, 1))``, in [0, 1).
-        seed: seed of the generator for losses, delays and clocks (int >= 0).
-        extrapolate: dead reckoning (not in seed 001): the receiver uses
-            ``q_j + p_j (t - t_send)`` instead of the received ``q_j``.
-    """
-
-    r_comm_m: float = math.inf
-    delay_min_s: float = 0.0
-    delay_max_s: float = 0.0
-    loss_prob: float = 0.0
-    period_s: float = 0.1
-    expiry_s: float = 1.0
-    mode: str = "synchronous"
-    period_jitter: float = 0.0
-    seed: int = 0
-    extrapolate: bool = False
-
-    def __post_init__(self) -> None:
-        for f in fields(self):
-            v = getattr(self, f.name)
-            if f.name == "mode":
-                if v not in MODES:
-                    raise ParameterError(f"CommConfig.mode must be one of {MODES}, got {v!r}")
-                continue
-            if f.name == "extrapolate":
-                if not isinstance(v, bool | np.bool_):
-                    raise ParameterError(f"CommConfig.extrapolate must be a bool, got {v!r}")
-                continue
-            if isinstance(v, bool) or not isinstance(v, int | float | np.integer | np.floating):
-                raise ParameterError(f"CommConfig.{f.name} must be a number, got {v!r}")
-            if math.isnan(v):
-                raise ParameterError(f"CommConfig.{f.name} must not be NaN")
-        if not self.r_comm_m > 0:
-            raise ParameterError(f"CommConfig.r_comm_m must be > 0 m, got {self.r_comm_m!r}")
-        for name in ("delay_min_s", "delay_max_s"):
-            v = getattr(self, name)
-            if not (v >= 0 and math.isfinite(v)):
-                raise ParameterError(f"CommConfig.{name} must be finite and >= 0 s, got {v!r}")
-        if self.delay_max_s < self.delay_min_s:
-            raise ParameterError(
-                f"CommConfig.delay_max_s must be >= delay_min_s, got "
-                f"{self.delay_max_s!r} < {self.delay_min_s!r}"
-            )
-        if not 0.0 <= self.loss_prob < 1.0:
-            raise ParameterError(f"CommConfig.loss_prob must lie in [0, 1), got {self.loss_prob!r}")
-        if not (self.period_s > 0 and math.isfinite(self.period_s)):
-            raise ParameterError(
-                f"CommConfig.period_s must be finite and > 0 s, got {self.period_s!r}"
-            )
-        if not self.expiry_s > 0:
-            raise ParameterError(f"CommConfig.expiry_s must be > 0 s, got {self.expiry_s!r}")
-        if not 0.0 <= self.period_jitter < 1.0:
-            raise ParameterError(
-                f"CommConfig.period_jitter must lie in [0, 1), got {self.period_jitter!r}"
-            )
-        if not (float(self.seed).is_integer() and self.seed >= 0):
-            raise ParameterError(f"CommConfig.seed must be an integer >= 0, got {self.seed!r}")
-
-    @property
-    def is_ideal(self) -> bool:
-        """No delay, no loss, infinite radius: the views can only lag by the clock."""
-        return self.delay_max_s == 0 and self.loss_prob == 0 and math.isinf(self.r_comm_m)
-
-
-@dataclass
-class CommStats:
-    """Counters since construction (message copies, i.e. per sender and receiver)."""
-
-    sent: int = 0  # copies addressed to receivers within r_comm
-    lost: int = 0  # dropped by packet loss
-    delivered: int = 0  # reached the receiver's buffer
-    too_late: int = 0  # delay > expiry_s: would arrive expired, discarded
-    out_of_order: int = 0  # arrived after a newer copy from the same sender, discarded
-    expired: int = 0  # dropped from a buffer by expiry
-    agent_updates: int = 0  # control recomputations (agent-instants)
-    law_calls: int = 0  # calls of the wrapped law
-    union_rows: int = 0  # rows passed to the law in union calls
-
-    def as_dict(self) -> dict[str, int]:
-        return {f.name: getattr(self, f.name) for f in fields(self)}
-
-
-class _Msgs:
-    """Message copies as parallel arrays (E rows)."""
-
-    __slots__ = ("recv", "send", "t_send", "t_arrive", "q", "p", "size")
-
-    def __init__(self, recv, send, t_send, t_arrive, q, p, size) -> None:
-        self.recv = recv  # receiver slot (E,) int
-        self.send = send  # sender slot (E,) int
-        self.t_send = t_send  # (E,) s
-        self.t_arrive = t_arrive  # (E,) s
-        self.q = q  # (E, m) m
-        self.p = p  # (E, m) m/s
-        self.size = size  # (E, 2) length, width in m (NaN: unknown)
-
-    @classmethod
-    def empty(cls, m: int) -> _Msgs:
-        return cls(
-            np.empty(0, np.int64),
-            np.empty(0, np.int64),
-            np.empty(0),
-            np.empty(0),
-            np.empty((0, m)),
-            np.empty((0, m)),
-            np.empty((0, 2)),
-        )
-
-    def __len__(self) -> int:
-        return len(self.recv)
-
-    def take(self, idx) -> _Msgs:
-        return _Msgs(*(getattr(self, k)[idx] for k in self.__slots__))
-
-    @staticmethod
-    def concat(a: _Msgs, b: _Msgs) -> _Msgs:
-        if len(a) == 0:
-            return b
-        if len(b) == 0:
-            return a
-        return _Msgs(*(np.concatenate([getattr(a, k), getattr(b, k)]) for k in a.__slots__))
-
-
-@dataclass
-class _Clocks:
-    """Per-slot clock and command state (grown on demand)."""
-
-    base: np.ndarray = field(default_factory=lambda: np.empty(0))  # s
-    period: np.ndarray = field(default_factory=lambda: np.empty(0))  # s
-    count: np.ndarray = field(default_factory=lambda: np.empty(0, np.int64))
-    present: np.ndarray = field(default_factory=lambda: np.empty(0, bool))
-
-    def grow(self, cap: int) -> None:
-        extra = cap - len(self.base)
-        if extra <= 0:
-            return
-        self.base = np.concatenate([self.base, np.zeros(extra)])
-        self.period = np.concatenate([self.period, np.ones(extra)])
-        self.count = np.concatenate([self.count, np.zeros(extra, np.int64)])
-        self.present = np.concatenate([self.present, np.zeros(extra, bool)])
-
-    def next_instant(self, slots: np.ndarray) -> np.ndarray:
-        return self.base[slots] + self.count[slots] * self.period[slots]
 
 
 class CommunicatingController:
@@ -308,11 +152,11 @@ class CommunicatingController:
         self.stats = CommStats()
         self._slot_of: dict = {}
         self._id_of: list = []
-        self._clk = _Clocks()
+        self._clk = Clocks()
         self._u: np.ndarray | None = None
         self._m: int | None = None
-        self._buf: _Msgs | None = None
-        self._pending: _Msgs | None = None
+        self._buf: Messages | None = None
+        self._pending: Messages | None = None
         reset_law = getattr(self.law, "reset", None)
         if callable(reset_law):
             reset_law()
@@ -329,8 +173,8 @@ class CommunicatingController:
         if self._m is None:
             self._m = m
             self._u = np.zeros((0, m))
-            self._buf = _Msgs.empty(m)
-            self._pending = _Msgs.empty(m)
+            self._buf = Messages.empty(m)
+            self._pending = Messages.empty(m)
         elif m != self._m:
             raise ValueError(f"space dimension changed from {self._m} to {m}; call reset()")
         t = float(obs.t)
@@ -449,10 +293,10 @@ class CommunicatingController:
             size = np.column_stack([obs.length[src], obs.width[src]])
         else:
             size = np.full((len(src), 2), np.nan)
-        msgs = _Msgs(
+        msgs = Messages(
             slots[dst], slots[src], np.full(len(src), t), t + delay, obs.q[src], obs.p[src], size
         )
-        self._pending = _Msgs.concat(self._pending, msgs)
+        self._pending = Messages.concat(self._pending, msgs)
 
     def _deliver(self, t: float, tol: float) -> None:
         arrived = self._pending.t_arrive <= t + tol
@@ -460,7 +304,7 @@ class CommunicatingController:
             return
         new = self._pending.take(arrived)
         self._pending = self._pending.take(~arrived)
-        allm = _Msgs.concat(self._buf, new)
+        allm = Messages.concat(self._buf, new)
         is_new = np.concatenate([np.zeros(len(self._buf), bool), np.ones(len(new), bool)])
         order = np.lexsort((allm.t_send, allm.send, allm.recv))
         allm, is_new = allm.take(order), is_new[order]
@@ -501,7 +345,7 @@ class CommunicatingController:
             return
         if self.config.extrapolate and len(entries):
             entries.q = entries.q + entries.p * (t - entries.t_send)[:, None]
-        blocks = _Views.build(obs, egos, entries, block_of_slot[entries.recv], self._id_of)
+        blocks = Views.build(obs, egos, entries, block_of_slot[entries.recv], self._id_of)
         axis = self._union_axis(obs)
         if self.batching == "union" and axis is None:
             raise ValueError(
@@ -532,7 +376,7 @@ class CommunicatingController:
         return u
 
     def _views_are_truth(
-        self, obs: Observation, entries: _Msgs, n_egos: int, t: float, tol: float
+        self, obs: Observation, entries: Messages, n_egos: int, t: float, tol: float
     ) -> bool:
         """Every agent due and holding a fresh message from every other present agent."""
         n = obs.n
@@ -552,171 +396,3 @@ class CommunicatingController:
             if np.any(np.abs(obs.walls.normals[:, axis]) > 0):
                 return None
         return axis
-
-
-@dataclass
-class _Views:
-    """The per-agent views of one step, rows grouped by block (ego first)."""
-
-    block: np.ndarray  # (R,) block of each row
-    ego_rows: np.ndarray  # (B,) row of each block's ego
-    egos: np.ndarray  # (B,) observation row of each ego
-    q: np.ndarray  # (R, m)
-    p: np.ndarray  # (R, m)
-    ids: np.ndarray  # (R,) object
-    size: np.ndarray | None  # (R, 2) or None
-    starts: np.ndarray  # (B + 1,) row ranges
-
-    @classmethod
-    def build(cls, obs: Observation, egos, entries: _Msgs, entry_block, id_of) -> _Views:
-        nb = len(egos)
-        block = np.concatenate([np.arange(nb), entry_block])
-        key = np.concatenate([np.full(nb, -1), entries.send])
-        order = np.lexsort((key, block))
-        block = block[order]
-        q = np.concatenate([obs.q[egos], entries.q])[order]
-        p = np.concatenate([obs.p[egos], entries.p])[order]
-        is_ego = np.concatenate([np.ones(nb, bool), np.zeros(len(entries), bool)])[order]
-        ego_rows = np.flatnonzero(is_ego)
-        ego_ids = np.asarray(obs.ids, dtype=object)[egos]
-        ids = np.empty(len(block), dtype=object)
-        rows = zip(block.tolist(), is_ego.tolist(), key[order].tolist(), strict=True)
-        for r, (b, e, k) in enumerate(rows):
-            # ghost rows get their own ids so per-id state in the law cannot mix them up
-            ids[r] = ego_ids[b] if e else ("comm_view", ego_ids[b], id_of[k])
-        size = None
-        if obs.length is not None and obs.width is not None:
-            own = np.column_stack([obs.length[egos], obs.width[egos]])
-            size = np.concatenate([own, entries.size])[order]
-            bad = np.isnan(size).any(axis=1)
-            size[bad] = own[block[bad]]
-        starts = np.searchsorted(block, np.arange(nb + 1))
-        return cls(block, ego_rows, egos, q, p, ids, size, starts)
-
-    def _per_row(self, value, rows_block) -> np.ndarray | None:
-        """A (k,)- or (N, k)-shaped observation field as each row's ego's value, (rows, k)."""
-        if value is None:
-            return None
-        v = np.asarray(value, dtype=float)
-        if v.ndim == 1:
-            return np.broadcast_to(v, (len(rows_block), len(v))).copy()
-        return v[self.egos][rows_block]
-
-    @staticmethod
-    def _ego_value(value, ego: int) -> np.ndarray | None:
-        """A (k,)- or (N, k)-shaped observation field as the ego's (k,) value."""
-        if value is None:
-            return None
-        v = np.asarray(value, dtype=float)
-        return v.copy() if v.ndim == 1 else v[ego].copy()
-
-    def single(self, obs: Observation, b: int) -> Observation:
-        """Block ``b`` alone, untranslated."""
-        sl = slice(self.starts[b], self.starts[b + 1])
-        ego = int(self.egos[b])
-        return Observation(
-            q=self.q[sl],
-            p=self.p[sl],
-            t=obs.t,
-            dt=obs.dt,
-            ids=self.ids[sl],
-            length=None if self.size is None else self.size[sl, 0],
-            width=None if self.size is None else self.size[sl, 1],
-            others_q=obs.others_q,
-            others_p=obs.others_p,
-            others_length=obs.others_length,
-            others_width=obs.others_width,
-            circles=obs.circles,
-            walls=obs.walls,
-            road_edges=self._ego_value(obs.road_edges, ego),
-            leader_q=self._ego_value(obs.leader_q, ego),
-            leader_p=self._ego_value(obs.leader_p, ego),
-            period_s=obs.period_s,
-            desired_speed=self._by_id(obs, obs.desired_speed, self.ids[sl]),
-            road=obs.road,
-            others_ids=obs.others_ids,
-            extras=obs.extras,
-        )
-
-    @staticmethod
-    def _by_id(obs: Observation, values, ids) -> np.ndarray | None:
-        """A per-agent field of ``obs`` (N,) looked up for the view's rows by vehicle id."""
-        if values is None:
-            return None
-        index = {vid: k for k, vid in enumerate(obs.ids.tolist())}
-        vals = np.asarray(values, dtype=float)
-        out = np.empty(len(ids))
-        for r, vid in enumerate(ids.tolist()):
-            # a neighbour's row is ("comm_view", ego id, its own id); it may have left
-            own = vid[-1] if isinstance(vid, tuple) and vid[:1] == ("comm_view",) else vid
-            out[r] = vals[index[own]] if own in index else np.nan
-        return out
-
-    def union(self, obs: Observation, axis: int, gap: float) -> Observation:
-        """All blocks in one observation, block ``b`` shifted along ``axis``."""
-        nb = len(self.egos)
-        lo = np.minimum.reduceat(self.q[:, axis], self.starts[:-1])
-        hi = np.maximum.reduceat(self.q[:, axis], self.starts[:-1])
-        # environment objects move with every block: widen each block by their extent
-        env_lo, env_hi = [], []
-        if obs.circles is not None and len(obs.circles.radii):
-            c = obs.circles.centres[:, axis]
-            env_lo.append(np.min(c - obs.circles.radii))
-            env_hi.append(np.max(c + obs.circles.radii))
-        if obs.others_q is not None and len(obs.others_q):
-            reach = 0.5 * np.hypot(obs.others_length, obs.others_width)
-            env_lo.append(np.min(obs.others_q[:, axis] - reach))
-            env_hi.append(np.max(obs.others_q[:, axis] + reach))
-        if env_lo:
-            lo = np.minimum(lo, min(env_lo))
-            hi = np.maximum(hi, max(env_hi))
-        width = hi - lo + gap
-        start = np.concatenate([[0.0], np.cumsum(width)[:-1]])
-        shift = start - lo  # (B,)
-        row_shift = shift[self.block]
-        q = self.q.copy()
-        q[:, axis] += row_shift
-        leader_q = leader_p = None
-        if obs.leader_q is not None:
-            leader_q = self._per_row(obs.leader_q, self.block)
-            leader_q[:, axis] += row_shift
-        if obs.leader_p is not None:
-            leader_p = self._per_row(obs.leader_p, self.block)
-        edges = self._per_row(obs.road_edges, self.block)
-        if edges is not None and axis == 1:
-            edges = edges + row_shift[:, None]
-        circles = None
-        if obs.circles is not None and len(obs.circles.radii):
-            k = len(obs.circles.radii)
-            cen = np.tile(obs.circles.centres, (nb, 1))
-            cen[:, axis] += np.repeat(shift, k)
-            circles = Circles(cen, np.tile(obs.circles.radii, nb))
-        others = {}
-        if obs.others_q is not None and len(obs.others_q):
-            k = len(obs.others_q)
-            oq = np.tile(obs.others_q, (nb, 1))
-            oq[:, axis] += np.repeat(shift, k)
-            others = dict(
-                others_q=oq,
-                others_p=np.tile(obs.others_p, (nb, 1)),
-                others_length=np.tile(obs.others_length, nb),
-                others_width=np.tile(obs.others_width, nb),
-            )
-        return Observation(
-            q=q,
-            p=self.p,
-            t=obs.t,
-            dt=obs.dt,
-            ids=self.ids,
-            length=None if self.size is None else self.size[:, 0],
-            width=None if self.size is None else self.size[:, 1],
-            circles=circles,
-            walls=obs.walls,
-            road_edges=edges,
-            leader_q=leader_q,
-            leader_p=leader_p,
-            period_s=obs.period_s,
-            desired_speed=self._by_id(obs, obs.desired_speed, self.ids),
-            extras=obs.extras,
-            **others,
-        )

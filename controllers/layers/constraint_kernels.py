@@ -1,6 +1,6 @@
-"""Compiled passes of the constraint layers (:mod:`controllers.constraints`).
+"""Compiled passes of the constraint layers (:mod:`controllers.layers.constraints`).
 
-:class:`~controllers.constraints.AccelerationBox` on the road's (N, 2) commands was five
+:class:`~controllers.layers.constraints.AccelerationBox` on the road's (N, 2) commands was five
 small numpy calls per step (clip, compare, or, count, length), each paying numpy's
 per-call cost for a few hundred values; :func:`box_clip` is one pass with the same
 comparisons: ``np.clip`` of a finite value is the bound it passes or the value itself, a

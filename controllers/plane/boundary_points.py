@@ -82,7 +82,7 @@ Choices where the paper is silent or ambiguous (all documented here):
 
 Inputs: boundary points come from ``obs.extras["boundary_points"]`` ((K, m)
 array, m) with optional ``obs.extras["boundary_point_velocities"]`` ((K, m),
-m/s), and/or from an :class:`~controllers.obstacles.ObstacleSet` given to the
+m/s), and/or from an :class:`~controllers.plane.obstacles.ObstacleSet` given to the
 constructor (sampled once at ``spacing``); both sets are used when present.
 Only points within ``r`` of an agent act on it. The gamma-agent is
 ``obs.leader_q`` / ``obs.leader_p``; without it the expected-velocity term is
@@ -104,12 +104,12 @@ from typing import NamedTuple
 
 import numpy as np
 
-from .constraints import ConstrainedController, SpeedSaturation
-from .neighbours import cross_pairs, neighbour_pairs, scatter_add
-from .observation import Observation
-from .obstacles import ObstacleSet, sense
-from .olfati_saber import phi, rho_h, sigma_1_vec, sigma_norm_scalar
-from .params import ParameterError
+from controllers.errors import ParameterError
+from controllers.layers.constraints import ConstrainedController, SpeedSaturation
+from controllers.neighbours import cross_pairs, neighbour_pairs, scatter_add
+from controllers.observation import Observation
+from controllers.plane.obstacles import ObstacleSet, sense
+from controllers.plane.potentials import phi, rho_h, sigma_1_vec, sigma_norm_scalar
 
 TWO_PI = 2.0 * math.pi
 
@@ -396,7 +396,7 @@ class BoundaryPointController:
 
     ``compute(obs) -> u`` (N, m) m/s^2 for m = 2 (boundary points need a
     plane; without any boundary point other m work too). ``obstacles`` (an
-    :class:`~controllers.obstacles.ObstacleSet`) is sampled once at
+    :class:`~controllers.plane.obstacles.ObstacleSet`) is sampled once at
     ``spacing`` (m); points in ``obs.extras["boundary_points"]`` are added each
     step. ``memory`` maps vehicle id to its split point and motion mode.
     """
@@ -564,7 +564,7 @@ class BoundaryPointController:
         """Distance (P,), sigma-norm (P,), ``n = sigma_eps(z)`` (P, m), ``phi_alpha``, bump.
 
         One pass for what ``phi_alpha``, ``adjacency``, ``sigma_norm`` and
-        ``sigma_grad`` of :mod:`controllers.olfati_saber` would each recompute.
+        ``sigma_grad`` of :mod:`controllers.plane.potentials` would each recompute.
         """
         p = self.params
         sq = z[:, 0] * z[:, 0]

@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .flocking import OlfatiSaberController
-from .neighbours import neighbour_pairs
-from .olfati_saber import psi_alpha, sigma_norm
+from controllers.neighbours import neighbour_pairs
+from controllers.plane.olfati_saber import OlfatiSaberController
+from controllers.plane.potentials import psi_alpha, sigma_norm
 
 
 def flock_energy(

@@ -49,9 +49,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .neighbours import DENSE_MAX_N, cross_pairs, neighbour_pairs, scatter_add
-from .observation import Observation
-from .olfati_saber import (
+from controllers.neighbours import DENSE_MAX_N, cross_pairs, neighbour_pairs, scatter_add
+from controllers.observation import Observation
+from controllers.plane.params import FlockingParams
+from controllers.plane.potentials import (
     _sum_sq,
     adjacency,
     phi,
@@ -62,7 +63,6 @@ from .olfati_saber import (
     sigma_norm,
     sigma_norm_scalar,
 )
-from .params import FlockingParams
 
 _MIN_GAP = 1e-3  # m: distance used for a beta-agent when the agent is at or past it
 

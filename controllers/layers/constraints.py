@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .observation import Observation
-from .params import ParameterError
+from controllers.errors import ParameterError
+from controllers.observation import Observation
 
 
 @dataclass(frozen=True)
@@ -148,7 +148,7 @@ class AccelerationBox(Layer):
         lo, hi = self._bounds(m)
         if (m == 2 and self.a_max is None and u.dtype == np.float64
                 and u.flags.c_contiguous):  # the road's commands: one compiled pass
-            from controllers.constraint_kernels import box_clip
+            from controllers.layers.constraint_kernels import box_clip
 
             out, changed = box_clip(u, self.long_min, self.long_max, -self.lat_max,
                                     self.lat_max)

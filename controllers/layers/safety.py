@@ -37,7 +37,7 @@ Rules, applied in this order to CAV ``i`` with command ``u_i``:
 Every activation is counted per rule.
 
 The rules run in one compiled loop per CAV (numba,
-:func:`controllers.safety_kernels.apply_kernel`) over the vehicles within reach, found in
+:func:`controllers.layers.safety_kernels.apply_kernel`) over the vehicles within reach, found in
 a window of the vehicles sorted along the road (no pair arrays); it computes what the
 vectorised numpy form of the layer computed (``tests/test_exactness.py``).
 """
@@ -48,7 +48,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .params import ParameterError
+from controllers.errors import ParameterError
 
 
 @dataclass(frozen=True)
@@ -117,7 +117,7 @@ class SafetyConfig:
     @classmethod
     def for_run(cls, params: SafetyParams, dt: float, limits) -> SafetyConfig:
         """The layer's configuration for a run with step ``dt`` (s) and ``limits``
-        (:class:`~controllers.constraints.ActuatorLimits`)."""
+        (:class:`~controllers.layers.constraints.ActuatorLimits`)."""
         return cls(
             dt=dt,
             reaction_steps=params.reaction_steps,
@@ -261,10 +261,10 @@ def _f64(x) -> np.ndarray:
 
 
 def _apply_kernel():
-    """:func:`controllers.safety_kernels.apply_kernel` (numba: imported when first used)."""
+    """:func:`controllers.layers.safety_kernels.apply_kernel` (numba: imported when first used)."""
     global _APPLY_KERNEL
     if _APPLY_KERNEL is None:
-        from controllers.safety_kernels import apply_kernel
+        from controllers.layers.safety_kernels import apply_kernel
 
         _APPLY_KERNEL = apply_kernel
     return _APPLY_KERNEL
@@ -274,7 +274,7 @@ _APPLY_KERNEL = None
 
 
 def _scalars(c: SafetyConfig) -> np.ndarray:
-    """The layer's scalars for :func:`~controllers.safety_kernels.apply_kernel`, folded as
+    """The layer's scalars for :func:`~controllers.layers.safety_kernels.apply_kernel`, folded as
     the numpy rules folded them."""
     b = c.own_decel_mps2
     return np.array([

@@ -1,4 +1,4 @@
-"""The safety layer's compiled pass (:class:`controllers.safety.SafetyLayer`): one loop per
+"""The safety layer's compiled pass (:class:`controllers.layers.safety.SafetyLayer`): one loop per
 CAV over a window of the vehicles sorted along the road. Its own module so that importing
 the layer (a scenario's configuration) does not import numba."""
 

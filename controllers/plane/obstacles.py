@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .observation import Circles, Walls
+from controllers.observation import Circles, Walls
 
 if TYPE_CHECKING:  # imported where used: not at start-up (cosim list, config)
     from scipy.spatial import cKDTree
@@ -461,7 +461,7 @@ class ObstacleSet:
         return dist
 
     def cosim_obstacles(self, disc_radius: float = 0.5) -> tuple[Circles | None, Walls | None]:
-        """``(Circles, Walls)`` for :class:`~controllers.flocking.OlfatiSaberController`.
+        """``(Circles, Walls)`` for :class:`~controllers.plane.olfati_saber.OlfatiSaberController`.
 
         Circles map exactly; walls with a ``normal`` become OS06 infinite walls
         (hyperplanes); polygons and walls without a normal become discs of

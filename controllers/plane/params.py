@@ -14,9 +14,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-
-class ParameterError(ValueError):
-    """An invalid controller parameter; the message names it."""
+from controllers.errors import ParameterError
 
 
 def _gain_vector(value, name: str) -> tuple[float, ...]:
