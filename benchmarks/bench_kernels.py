@@ -6,7 +6,7 @@ Usage::
     .venv/bin/python benchmarks/bench_kernels.py --n 500
 
 * the road frame's projection (``cosim/road/frame_kernels.py``: ``geo_frame``,
-  ``geo_lateral``) against ``frame._lane_frame_numpy`` / ``frame._lateral_numpy``, N
+  ``geo_lateral``) against ``frame_reference.lane_frame_reference`` / ``lateral_reference``, N
   vehicles at random on the lanes of networks/examples/multi_edge (kinks of +6 and -10
   degrees, netconvert's junction lanes: lanes not parallel to the road's line), built with
   netconvert's defaults; the two give the same bits (tests/test_frame_kernels.py);
@@ -49,7 +49,8 @@ def main(argv: list[str] | None = None) -> int:
     from numba import njit
 
     from cosim.road import frame_kernels as FK
-    from cosim.road.frame import _lane_frame_numpy, _lateral_numpy, load_road_network
+    from cosim.road.frame import load_road_network
+    from cosim.road.frame_reference import lane_frame_reference, lateral_reference
     from tests.test_road_frame import ROUTES, build_example
 
     net = load_road_network(build_example("multi_edge", Path(tempfile.mkdtemp())),
@@ -73,9 +74,9 @@ def main(argv: list[str] | None = None) -> int:
     x = np.zeros(ns.n)
     many = [x] * 21
     cases = {
-        "lane_frame numpy": (lambda: _lane_frame_numpy(tb, k, pos, lat), 300),
+        "lane_frame numpy": (lambda: lane_frame_reference(tb, k, pos, lat), 300),
         "lane_frame compiled": (lambda: FK.geo_frame(k, pos, lat, args), 20000),
-        "lateral numpy": (lambda: _lateral_numpy(tb, k, pos, lat), 300),
+        "lateral numpy": (lambda: lateral_reference(tb, k, pos, lat), 300),
         "lateral compiled": (lambda: FK.geo_lateral(k, pos, lat, args), 20000),
         "numba call, 21 arrays": (lambda: call21(*many), 100000),
         "numba call, 3 arrays": (lambda: call3(x, x, x), 100000),

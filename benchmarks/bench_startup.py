@@ -59,10 +59,10 @@ def frames(kms: list[float], rounds: int) -> int:
     from test_line_nearest import _nearest_full
 
     from cosim.config import load_scenario
-    from cosim.road import frame as F
     from cosim.road.build import build_network
+    from cosim.road.polyline import Line
 
-    pruned = F._Line.nearest
+    pruned = Line.nearest
     cache = Path(tempfile.mkdtemp(prefix="bench_frames_"))
     specs = {km: dataclasses.replace(load_scenario("ring").network,
                                      circumference_m=1000.0 * km) for km in kms}
@@ -72,11 +72,11 @@ def frames(kms: list[float], rounds: int) -> int:
     for _ in range(rounds):
         for km, spec in specs.items():
             for variant, fn in (("pruned", pruned), ("full", _nearest_full)):
-                F._Line.nearest = fn
+                Line.nearest = fn
                 c0 = time.process_time()
                 build_network(spec, cache)
                 cpu.setdefault((km, variant), []).append(time.process_time() - c0)
-    F._Line.nearest = pruned
+    Line.nearest = pruned
     print(f"bench_startup --frames: a ring's road frame (build_network, network cached), "
           f"CPU s, medians of {rounds} interleaved round(s)")
     print(f"{'ring km':>8}{'search as is':>14}{'full search':>13}{'full / as is':>14}")

@@ -11,7 +11,7 @@ Measurements (SUMO 1.28, step 0.1 s; every SUMO run in its own process, one at a
    (total distance travelled / (ring length x time x 3)) after the warm-up, for several
    densities; the capacity is the maximum over densities of the mean over seeds.
 2. **Stopped obstacle (SL2015)**: a 1 km x 10.2 m road, a stopped vehicle 5 m x 3.4 m at
-   s = 550 m, d = -3.4 m (the right third), 4 000 veh/h of HDVs (issue 12's case); the
+   s = 550 m, d = -3.4 m (the right third), 4 000 veh/h of HDVs; the
    longest standstill, vehicles stopped > 30 s, the smallest 30 s flow past the obstacle
    (cross-section 562.5 m), collisions and boundary violations.
 3. **TUM LaneFreeDrive's ring (SL2015)**: ``cosim run tum_ring`` with HDVs only and SUMO
@@ -70,7 +70,7 @@ sys.path.insert(0, str(ROOT))
 SUMO_DEFAULT_HDV = {"tau": "1.0", "minGapLat": "0.5", "lcPushy": None, "lcAssertive": None,
                     "lcTimeToImpatience": None}
 
-#: Issue 12's obstacle case (HDVs only).
+#: The obstacle case (HDVs only).
 OBSTACLE_CASE = {
     "demand.cav_share": 0.0, "demand.inflow_vph": 4000.0,
     "obstacle.s_m": 550.0, "obstacle.d_m": -3.4, "obstacle.length_m": 5.0,

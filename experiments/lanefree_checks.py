@@ -1,4 +1,4 @@
-"""The lane-free law's must-show checks (issue 12), run in SUMO, judged against thresholds.
+"""The lane-free law's must-show checks, run in SUMO, judged against thresholds.
 
 Usage::
 
@@ -29,7 +29,7 @@ speeds U(25, 35) m/s on the ring):
                           trajectories every 1 s: the lateral figures
 ========================  =============================================================
 
-Checks (each on every seed unless it says "mean"; the thresholds are issue 12's):
+Checks (each on every seed unless it says "mean"; thresholds as the tracker set them):
 
 * every arm with CAVs: no collision involving a CAV (SUMO's and our geometric check), no
   CAV-step outside the road;
@@ -175,7 +175,7 @@ def plan_data(smoke: bool) -> dict:
             variants.append(v)
     return {
         "sweep": {"name": "lanefree_checks" + ("_smoke" if smoke else ""), "base": "default",
-                  "description": "issue 12's must-show checks of the lane-free law"},
+                  "description": "the must-show checks of the lane-free law"},
         "overrides": {"scenario.name": "lanefree_checks", "controller.kind": "flocking",
                       "outputs.sumo_collisions": True},
         "variants": variants,
@@ -334,7 +334,7 @@ def neck_table(results: pd.DataFrame) -> pd.DataFrame:
 
 def lateral_outputs(sweep_dir: Path, results: pd.DataFrame, out: Path) -> pd.DataFrame:
     """Lateral histograms and top views of the ``lateral/`` runs; returns their table."""
-    from cosim.analysis.figures import plot_top_view
+    from cosim.analysis.figures import save, top_view_figure
     from cosim.analysis.lateral import (
         lateral_figure,
         lateral_histogram,
@@ -362,10 +362,11 @@ def lateral_outputs(sweep_dir: Path, results: pd.DataFrame, out: Path) -> pd.Dat
                      "overtakes_per_vehicle_km": per_km, "overtakes": n,
                      "vehicle_km": km})
         t_end = float(tr["t_s"].max())
-        plot_top_view(tr, out / f"top_view_k{k}.png", times=[t_end - 20.0, t_end],
-                      edges=lambda s: (np.full(np.shape(s), -5.1), np.full(np.shape(s), 5.1)),
-                      title=f"TUM ring at {k} veh/km, 100 % CAVs (lane-free flocking)",
-                      window_m=250.0)
+        save(top_view_figure(
+            tr, times=[t_end - 20.0, t_end],
+            edges=lambda s: (np.full(np.shape(s), -5.1), np.full(np.shape(s), 5.1)),
+            title=f"TUM ring at {k} veh/km, 100 % CAVs (lane-free flocking)", window_m=250.0,
+        ), out / f"top_view_k{k}.png")
     if hists:
         lateral_figure(hists, 10.2, out / "lateral_positions.png",
                        title="Where CAVs drive on the 10.2 m TUM ring (after the warm-up)")
@@ -405,7 +406,7 @@ def report(sweep_dir: Path, smoke: bool) -> int:
     tum.to_csv(sweep_dir / "tum_ring.csv", index=False)
     neck.to_csv(sweep_dir / "width_drop.csv", index=False)
     lateral.to_csv(sweep_dir / "lateral.csv", index=False)
-    text = ["# Lane-free law: issue 12's checks" + (" (smoke form)" if smoke else ""), "",
+    text = ["# Lane-free law: the must-show checks" + (" (smoke form)" if smoke else ""), "",
             f"Runs: `{sweep_dir}/results.csv`. Command: `python -m experiments.lanefree_checks"
             + (" --smoke" if smoke else "") + "`.", "", "## Checks", "", _markdown(checks),
             "## TUM ring: flow per CAV share beside TUM LaneFreeDrive (loop detectors)", "",

@@ -1,4 +1,4 @@
-"""Lane-free driving on roads a user draws (issue 28): generated user-style roads, checked.
+"""Lane-free driving on roads a user draws: generated user-style roads, checked.
 
 Usage::
 
@@ -156,7 +156,7 @@ def plan_data(variants: dict[str, dict], smoke: bool) -> dict:
     duration = SMOKE_DURATION_S if smoke else DURATION_S
     return {
         "sweep": {"name": "user_road_checks" + ("_smoke" if smoke else ""), "base": "default",
-                  "description": "issue 28: lane-free driving on user-drawn roads"},
+                  "description": "lane-free driving on user-drawn roads"},
         "overrides": {"scenario.name": "user_road_checks", "controller.kind": "flocking",
                       "outputs.sumo_collisions": True, "scenario.duration_s": duration,
                       "scenario.warmup_s": WARMUP_S, "scenario.interval_s": INTERVAL_S,
@@ -241,7 +241,7 @@ def report(sweep_dir: Path, smoke: bool) -> int:
     checks.to_csv(sweep_dir / "checks.csv", index=False)
     arms.to_csv(sweep_dir / "arms.csv", index=False)
     cmd = "python -m experiments.user_road_checks" + (" --smoke" if smoke else "")
-    text = [f"# Lane-free driving on user-drawn roads (issue 28){' (smoke)' if smoke else ''}",
+    text = [f"# Lane-free driving on user-drawn roads{' (smoke)' if smoke else ''}",
             "", f"Runs: `{sweep_dir}/results.csv`. Command: `{cmd}`.", "", "## Arms", "",
             _markdown(arms), "## Checks", "", _markdown(checks)]
     (sweep_dir / "checks.md").write_text("\n".join(text))

@@ -539,7 +539,7 @@ def test_run_figures_are_titled_by_scenario_and_top_views_have_units(tmp_path):
     (run / "config.toml").write_text('[scenario]\nname = "ring_demo"\n[network]\nkind = "ring"\n'
                                      'circumference_m = 600.0\n')
     seen = {}
-    real = fg._save
+    real = fg.save
 
     def spy(fig, out_path):
         seen[Path(out_path).name] = fig._suptitle.get_text()
@@ -547,7 +547,7 @@ def test_run_figures_are_titled_by_scenario_and_top_views_have_units(tmp_path):
 
     import unittest.mock
 
-    with unittest.mock.patch.object(fg, "_save", spy):
+    with unittest.mock.patch("cosim.analysis.figures.runs.save", spy):
         fg.plot_run(run, tmp_path / "figs")
     assert seen == {"time_space.png": "Time-space diagram: ring_demo (run run)",
                     "top_view.png": "Top view: ring_demo (run run)"}

@@ -1,6 +1,6 @@
 """The compiled road frame (cosim/road/frame_kernels.py) against its numpy reference
-(cosim/road/frame.py: ``_lane_frame_numpy``, ``_lateral_numpy``): the same bits, element
-by element, on every kind of lane the frame meets.
+(cosim/road/frame_reference.py: ``lane_frame_reference``, ``lateral_reference``): the
+same bits, element by element, on every kind of lane the frame meets.
 
 The networks: netconvert's curve and multi-edge roads from networks/examples/ (bends,
 kinks, smoothed junction lanes: projected), its width change, the on-ramp cosim builds
@@ -20,7 +20,8 @@ import pytest
 
 from cosim.road import frame_kernels as FK
 from cosim.road.build import build_network
-from cosim.road.frame import _lane_frame_numpy, _lateral_numpy, load_road_network
+from cosim.road.frame import load_road_network
+from cosim.road.frame_reference import lane_frame_reference, lateral_reference
 from cosim.road.spec import NetworkSpec
 from tests.test_road_frame import ROUTES, build_example
 
@@ -75,12 +76,12 @@ def test_compiled_frame_is_numpys_bit_for_bit(networks, name, case):
     args = tb.kernel_args()
     for n in (1, 7, 300):
         k, pos, lat = _inputs(net, rng, n, **kw)
-        s_ref, d_ref = _lane_frame_numpy(tb, k, pos, lat)
+        s_ref, d_ref = lane_frame_reference(tb, k, pos, lat)
         s, d = FK.geo_frame(k, pos, lat, args)
         assert _same(s, s_ref) and _same(d, d_ref), (name, case, n)
         # and the inverse, at the frame's own d (the loop's use) and at other offsets
         for dd in (d_ref, rng.uniform(-4.0, 4.0, n)):
-            want = _lateral_numpy(tb, k, pos, dd)
+            want = lateral_reference(tb, k, pos, dd)
             got = FK.geo_lateral(k, pos, dd, args)
             assert _same(got, want), (name, case, n)
 

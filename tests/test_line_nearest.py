@@ -1,4 +1,4 @@
-"""The reference line's nearest-point search (``cosim.road.frame._Line.nearest``, used
+"""The reference line's nearest-point search (``cosim.road.polyline.Line.nearest``, used
 when a network's road frame is built) prunes the segments it measures each point
 against; it must give the bits of the full K x M search it replaced (copied below
 verbatim from commit 7f4978f) on rings, open lines, points far off and exactly between
@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cosim.road import frame as F
+from cosim.road.polyline import Line
 
 
 def _nearest_full(line, xy):  # commit 7f4978f's _Line.nearest, verbatim
@@ -39,24 +39,24 @@ def _nearest_full(line, xy):  # commit 7f4978f's _Line.nearest, verbatim
     return s_out, d_out, j_out
 
 
-def _ring(n_seg: int, radius_m: float) -> F._Line:
+def _ring(n_seg: int, radius_m: float) -> Line:
     a = np.linspace(0.0, 2 * np.pi, n_seg + 1)
     pts = np.column_stack([radius_m * np.cos(a), radius_m * np.sin(a)])
     pts[-1] = pts[0]
-    return F._Line.of(pts, True)
+    return Line.of(pts, True)
 
 
-def _wiggle(n_seg: int, rng) -> F._Line:
+def _wiggle(n_seg: int, rng) -> Line:
     """An open line with kinks, short and long segments and a hairpin."""
     steps = rng.uniform(0.2, 40.0, n_seg)
     heading = np.cumsum(rng.normal(0.0, 0.3, n_seg))
     heading[n_seg // 2:] += np.pi * 0.9  # a hairpin: far parts of the line come close
     pts = np.vstack([[0.0, 0.0], np.cumsum(np.column_stack(
         [steps * np.cos(heading), steps * np.sin(heading)]), axis=0)])
-    return F._Line.of(pts, False)
+    return Line.of(pts, False)
 
 
-def _points(line: F._Line, rng, k: int) -> np.ndarray:
+def _points(line: Line, rng, k: int) -> np.ndarray:
     """Points near the line, far off it, beyond an open line's ends, on its vertices and
     on the bisectors between segments (ties)."""
     lo, hi = line.pts.min(axis=0), line.pts.max(axis=0)

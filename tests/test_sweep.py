@@ -482,7 +482,7 @@ def test_a_folder_in_use_by_a_live_sweep_is_refused(tmp_path, capsys):
 def test_resume_refuses_while_a_run_is_still_held_by_a_live_process(tmp_path, monkeypatch):
     """A run's STARTED marker locked by a live process (an orphan that has not ended):
     resume waits IN_FLIGHT_WAIT_S, then refuses without touching the folder."""
-    from cosim.sweeps import execute
+    from cosim.sweeps import execute, locks
 
     monkeypatch.setattr(execute, "IN_FLIGHT_WAIT_S", 0.5)
     f = _write(tmp_path, TINY)
@@ -502,14 +502,14 @@ def test_resume_refuses_while_a_run_is_still_held_by_a_live_process(tmp_path, mo
     )
     try:
         assert holder.stdout.readline().strip() == "locked"
-        assert execute.run_in_flight(run) == holder.pid
+        assert locks.run_in_flight(run) == holder.pid
         with pytest.raises(ConfigError, match=f"1 run of .* still running .*pid {holder.pid}"):
             sw.run_sweep(plan, out, resume=True, progress=False)
         assert sorted(p.name for p in run.iterdir()) == ["STARTED"]
     finally:
         holder.kill()
         holder.wait()
-    assert execute.run_in_flight(run) is None  # the kernel released the lock
+    assert locks.run_in_flight(run) is None  # the kernel released the lock
 
 
 @pytest.mark.sumo
@@ -549,7 +549,7 @@ def test_killing_the_sweep_ends_its_workers_and_resume_runs_each_run_once(
     """kill -9 of the sweep process while two runs are in progress: both workers end
     within a few seconds (their watchdog sees the parent gone), none finishes its run;
     a --resume started at once completes the grid, and no run ran twice at a time."""
-    from cosim.sweeps.execute import process_alive
+    from cosim.sweeps.locks import process_alive
 
     repo = Path(__file__).resolve().parents[1]
     # two runs, long enough (150 s simulated, about 2 s of wall time) to be killed in flight

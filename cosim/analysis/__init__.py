@@ -9,8 +9,8 @@ Modules, by job:
   TUM's ring, the lane-free gain at equal time gap, the 5 %-HDV loss) and report;
 * :mod:`cosim.analysis.report`: :func:`analyse` writes every table (CSV and Markdown),
   ``report.md`` (with the grid that actually ran) and the figures;
-* :mod:`cosim.analysis.figures`: matplotlib figures in one style (imported on use: it
-  loads matplotlib);
+* :mod:`cosim.analysis.figures`: matplotlib figures in one style, a package by kind
+  (style, saving, sweep, run and headline figures; imported on use: it loads matplotlib);
 * :mod:`cosim.analysis.cli`: ``cosim analyse`` (argparse parser and command).
 """
 

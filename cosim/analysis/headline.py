@@ -1,4 +1,4 @@
-"""The headline experiment's tables (issue 13): capacity per arm, TUM's ring, the lane-free
+"""The headline experiment's tables: capacity per arm, TUM's ring, the lane-free
 gain at equal time gap, the ring fundamental diagram and the 5 %-HDV capacity loss.
 
 Input: a sweep whose runs are variants named ``PART/ARM#RUN`` (``experiments/sweeps/
@@ -30,7 +30,7 @@ from cosim.analysis.tables import SweepResults, t_interval
 if TYPE_CHECKING:
     import pandas as pd
 
-#: TUM LaneFreeDrive's ring results (1 km x 10.2 m, 225 veh/km; issue 12), veh/h by CAV
+#: TUM LaneFreeDrive's ring results (1 km x 10.2 m, 225 veh/km), veh/h by CAV
 #: share: their "Potential Lines" CAVs among their strip-based human model.
 TUM_RING_VPH = {0.0: 6613.0, 0.1: 6688.0, 0.5: 7554.0, 0.9: 11745.0, 0.95: 13337.0,
                 0.99: 15029.0, 1.0: 15504.0}

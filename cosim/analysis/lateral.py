@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from cosim.analysis.figures import _save, plt
+from cosim.analysis.figures.output import plt, save
 
 #: Histogram bin width, m.
 BIN_M = 0.1
@@ -167,4 +167,4 @@ def lateral_figure(hists: Sequence[tuple[str, pd.DataFrame]], road_width_m: floa
     axes[0, 0].legend(fontsize=7, ncol=3, loc="upper right")
     fig.suptitle(title)
     fig.tight_layout()
-    return _save(fig, out_path)
+    return save(fig, out_path)

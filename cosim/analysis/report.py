@@ -151,14 +151,13 @@ def _figures(res, tables, fig_dir: Path, runs, max_run_figures, times) -> list[P
     made = []
     name = res.plan.get("name") or res.root.name
     if not tables["fd_runs"].empty:
-        made.append(fg.plot_fundamental_diagram(
-            tables["fd_runs"], fig_dir / "fundamental_diagram.png", res.series_cols,
-            demand_col=res.demand_col, intervals=tables["fd_intervals"],
-            title=name,
-        ))
+        made.append(fg.save(fg.fundamental_diagram_figure(
+            tables["fd_runs"], res.series_cols, demand_col=res.demand_col,
+            intervals=tables["fd_intervals"], title=name,
+        ), fig_dir / "fundamental_diagram.png"))
     if not tables["capacity"].empty and "demand.cav_share" in tables["capacity"]:
-        made.append(fg.plot_capacity(tables["capacity"], fig_dir / "capacity.png",
-                                     res.series_cols, title=name))
+        made.append(fg.save(fg.capacity_figure(tables["capacity"], res.series_cols, title=name),
+                            fig_dir / "capacity.png"))
     if runs is None:
         runs = [r for r in res.ok["run_id"]
                 if (res.run_dir(r) / "trajectories.csv").is_file()][:max_run_figures]
@@ -189,22 +188,23 @@ def _headline(res: SweepResults, tables: dict, out: Path, confidence: float,
         fig_dir.mkdir(parents=True, exist_ok=True)
         name = res.plan.get("name") or res.root.name
         if not head["headline_bottleneck"].empty:
-            figs.append(fg.plot_headline_capacity(head["headline_bottleneck"],
-                                                  fig_dir / "headline_capacity.png", name))
+            figs.append(fg.save(fg.headline_capacity_figure(head["headline_bottleneck"], name),
+                                fig_dir / "headline_capacity.png"))
         ok = res.ok
         if not head["headline_tum_ring"].empty:
             ring = ok[ok["part"] == "tum_ring"]
-            figs.append(fg.plot_headline_mixed(head["headline_tum_ring"], ring,
-                                               fig_dir / "headline_mixed.png",
-                                               hl.TUM_RING_VPH, name))
+            figs.append(fg.save(fg.headline_mixed_figure(head["headline_tum_ring"], ring,
+                                                         hl.TUM_RING_VPH, name),
+                                fig_dir / "headline_mixed.png"))
         fd_runs_ = hl.ring_fd_runs(res)
         if len(fd_runs_):
             ring = ok[(ok["part"] == "tum_ring")]
             ref = ring[pd_numeric(ring, "demand.cav_share") == 1.0]
-            figs.append(fg.plot_headline_fd(fd_runs_, fig_dir / "headline_fd.png", name, ref))
+            figs.append(fg.save(fg.headline_fd_figure(fd_runs_, name, ref),
+                                fig_dir / "headline_fd.png"))
         if not head["headline_lanefree_gain"].empty:
-            figs.append(fg.plot_headline_gain(head["headline_lanefree_gain"],
-                                              fig_dir / "headline_gain.png", name))
+            figs.append(fg.save(fg.headline_gain_figure(head["headline_lanefree_gain"], name),
+                                fig_dir / "headline_gain.png"))
     md = out / "headline.md"
     md.write_text(hl.headline_markdown(head, confidence,
                                        [p.relative_to(out).as_posix() for p in figs],

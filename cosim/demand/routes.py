@@ -80,9 +80,9 @@ class RouteInfo:
     ring_initial_speed_mps: float | None = None
 
 
-# Vehicle colours in sumo-gui (8-bit RGB), the same as the figures' (cosim/analysis/figures.py):
-# matplotlib's tab:blue for CAVs and tab:orange for HDVs, a colour-blind-safe pair that also
-# differs in lightness (relative luminance 0.17 vs 0.36).
+# Vehicle colours in sumo-gui (8-bit RGB), the same as the figures'
+# (cosim/analysis/figures/style.py): matplotlib's tab:blue for CAVs and tab:orange for HDVs,
+# a colour-blind-safe pair that also differs in lightness (relative luminance 0.17 vs 0.36).
 CAV_RGB = (31, 119, 180)
 HDV_RGB = (255, 127, 14)
 

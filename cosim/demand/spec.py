@@ -67,8 +67,8 @@ CAV_TAU_S = 0.5
 #: Krauss reaction time (desired time gap) of human drivers, s. 1.3 s puts the road-limited
 #: capacity of one lane at about 2 160 veh/h (the maximum, at 27 veh/km per lane, of the
 #: flow-density curve on a 1 km ring of three 3.4 m lanes with LC2013: no entrance, mean of
-#: 3 seeds; SUMO's default 1.0 s gives about 2 640 veh/h), inside the 2 000-2 400 veh/h asked
-#: for by issue 13 and the HCM's 2 250-2 400 pc/h/ln for basic freeway segments. With it
+#: 3 seeds; SUMO's default 1.0 s gives about 2 640 veh/h), inside a 2 000-2 400 veh/h target
+#: and the HCM's 2 250-2 400 pc/h/ln for basic freeway segments. With it
 #: SUMO's lane-free drivers carry about 6 700 veh/h on TUM's 225 veh/km ring (SUMO's
 #: defaults: 8 840), beside TUM's strip-based human model (6 613 veh/h).
 HDV_TAU_S = 1.3
@@ -107,7 +107,7 @@ HDV_MAX_SPEED_LAT_MPS = 1.5
 #: (strategic) manoeuvre, accepting down to (1 - lcPushy) of minGapLat; any lcPushy > 0 also
 #: lets a driver start a lateral move before all of it is free. Without it SUMO's drivers
 #: stand still for 130-275 s behind a stopped vehicle covering the right third of a 10.2 m
-#: road at 4 000 veh/h (issue 12's case); with lcPushy alone, at most 45-55 s.
+#: road at 4 000 veh/h; with lcPushy alone, at most 45-55 s.
 HDV_LC_PUSHY = 0.5
 
 

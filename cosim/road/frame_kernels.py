@@ -6,8 +6,8 @@ lateral position) to the road frame's (s, d) and back, every vehicle, every step
   ``d = d0 + lat``. They return ``ok = False`` as soon as a vehicle is on another lane.
 * ``geo_frame`` / ``geo_lateral``: any lanes (a user's kinks and bends, netconvert's
   junction lanes, a ramp): the point SUMO computes on the lane, projected onto the
-  reference line (and back), as the numpy reference ``frame._lane_frame_numpy`` and
-  ``frame._lateral_numpy`` do.
+  reference line (and back), as the numpy reference
+  ``frame_reference.lane_frame_reference`` and ``frame_reference.lateral_reference`` do.
 
 Each does the numpy path's arithmetic element by element, in the same order (numpy's
 ``interp``, ``searchsorted``, ``mod`` and ``clip`` branch for branch): the same bits
@@ -80,7 +80,7 @@ def parallel_lateral(k, pos, d, lane_len, next_lane, par, par_d0):
 
 # ---- lanes that do not run parallel to the line (curves, a user's bends): projection ----
 #
-# ``tables`` is :meth:`cosim.road.frame._Tables.kernel_args`: one tuple of the run-time
+# ``tables`` is :meth:`cosim.road.lane_tables.Tables.kernel_args`: one tuple of the run-time
 # tables, in the order unpacked below. Each helper does what the numpy function it names
 # does to one element.
 
@@ -127,7 +127,7 @@ def _interp(x, xp, fp):
 
 @njit(cache=True)
 def _lane_point(kk, pos, tables):
-    """``_lane_points`` for one vehicle: centre point, left normal and table key."""
+    """``lane_tables.lane_points`` for one vehicle: centre point, left normal and table key."""
     lane_len, seg_key, seg_p0, seg_scale = tables[0], tables[2], tables[3], tables[4]
     seg_a, seg_t, seg_n, lane_key = tables[5], tables[6], tables[7], tables[24]
     hi = lane_len[kk]
@@ -146,7 +146,7 @@ def _lane_point(kk, pos, tables):
 
 @njit(cache=True)
 def _segment_of(g, tables):
-    """``_Line.segment_of`` for one arc length ``g`` (m)."""
+    """``polyline.Line.segment_of`` for one arc length ``g`` (m)."""
     cum = tables[11]
     periodic = tables[14]
     n_seg = cum.shape[0] - 1
@@ -162,7 +162,7 @@ def _segment_of(g, tables):
 
 @njit(cache=True)
 def _holding(x, y, j, tables):
-    """``_Line.holding`` for one point: walk from segment ``j`` to the one that holds the
+    """``polyline.Line.holding`` for one point: walk from segment ``j`` to the one that holds the
     point's foot (at most ``max_walk`` steps; a reversal stops it)."""
     pts, tan, seg = tables[10], tables[12], tables[13]
     periodic = tables[14]
@@ -198,7 +198,7 @@ def _holding(x, y, j, tables):
 
 @njit(cache=True)
 def _to_s(g, tables):
-    """``_Measure.to_s`` for one arc length ``g`` (m)."""
+    """``lane_tables.Measure.to_s`` for one arc length ``g`` (m)."""
     m_g, m_s = tables[15], tables[16]
     m_periodic, g_period, s_period = tables[17], tables[18], tables[19]
     if m_periodic:
@@ -215,7 +215,7 @@ def _to_s(g, tables):
 @njit(cache=True)
 def geo_frame(k, pos, lat, tables):
     """Road-frame ``(s, d)`` (N,) m of SUMO positions on any lanes: what
-    ``RoadNetwork.lane_frame``'s numpy path returns, bit for bit (``_frame_of`` on the
+    ``RoadNetwork.lane_frame``'s numpy path returns, bit for bit (``lane_tables.frame_of`` on the
     vehicles on route lanes, ``s = NaN, d = lat`` off them).
 
     Args: lane table keys ``k`` (N,) (-1 off-route), lane positions ``pos`` and lateral lane

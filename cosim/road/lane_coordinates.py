@@ -5,8 +5,9 @@ to lane (:mod:`cosim.road.frame` maps every main-route lane by them).
 SUMO moves a vehicle from a lane onto the junction lane and the next lane keeping its
 lateral lane position, shifted only where the lanes' shapes do not meet (``MSLink``;
 :func:`link_shift`, 0 on netconvert's networks); its collision check and its drivers
-compare those positions. ``tb`` below is the frame's lane table (``index``, ``measure``,
-``par``, ``par_s0``, ``par_d0``); lengths in m.
+compare those positions. ``tb`` below is the frame's lane tables
+(:class:`cosim.road.lane_tables.Tables`: ``index``, ``measure``, ``par``, ``par_s0``,
+``par_d0``); lengths in m.
 """
 
 from __future__ import annotations
@@ -63,8 +64,9 @@ def lane_coordinates(net: Any, tb: Any, route: Sequence[str], periodic: bool,
     moves sideways at a joint (a width change built with netconvert's defaults hangs the
     narrower lane from the left border), SUMO draws a vehicle that keeps its lateral lane
     position jumping sideways along the short junction lane between them, at an angle;
-    in SUMO's own coordinates it drives straight. The road frame follows SUMO's
-    coordinates on the main route, so that what the law keeps apart SUMO keeps apart.
+    in SUMO's own coordinates it drives straight, and the neck lies centred. The road
+    frame follows SUMO's coordinates on the main route, so that what the law keeps apart
+    SUMO keeps apart (tests/test_user_roads.py).
 
     ``d0``: the first edge's lanes are placed across it as SUMO places them (the middle
     lane's centre, or the border between the two middle lanes, at 0); each connection

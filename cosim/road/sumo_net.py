@@ -1,7 +1,8 @@
 """A SUMO network as sumolib reads it, and the few questions the road frame asks of it:
 its lanes in index order, the reference lane of an edge, the connections between two
-edges and the junction lanes a connection passes through. Every failure is one
-:class:`~cosim.errors.NetworkError` line."""
+edges, the junction lanes a connection passes through and the lanes a road continues on
+after a lane is added beside it. Every failure is one :class:`~cosim.errors.NetworkError`
+line."""
 
 from __future__ import annotations
 
@@ -80,3 +81,12 @@ def via_chain(net: Any, conn: Any, to_edge: str) -> list[Any]:
 
 def connections(edge: Any, to_edge: str) -> list[Any]:
     return [c for ln in edge.getLanes() for c in ln.getOutgoing() if c.getTo().getID() == to_edge]
+
+
+def continuing_lanes(prev: Any, edge: Any) -> list[Any] | None:
+    """The lanes of ``edge`` that the lanes of ``prev`` lead onto, right to left, when
+    they are not all of them (a lane added beside the road, e.g. an acceleration lane);
+    else None."""
+    reached = {c.getToLane().getID() for c in connections(prev, edge.getID())}
+    lanes = [ln for ln in lanes_of(edge) if ln.getID() in reached]
+    return lanes if lanes and len(lanes) < len(lanes_of(edge)) else None

@@ -4,9 +4,14 @@ Modules, by job:
 
 * :mod:`cosim.sweeps.plan`: the sweep file (TOML) parsed and validated into a
   :class:`SweepPlan` of grid points, each with its stable ``run_id``;
-* :mod:`cosim.sweeps.execute`: running the plan: the local process pool or Dask, one
-  run's execution in its own process, markers and locks (no run twice at once, workers
-  end when the sweep dies), :func:`run_sweep`;
+* :mod:`cosim.sweeps.execute`: running the plan, :func:`run_sweep`: options and folder
+  checks, the sweep lock, the results table; it drives
+* :mod:`cosim.sweeps.tasks`: one run as a task (:class:`RunTask`) and its execution in
+  its own process (:func:`execute_task`; libsumo holds one simulation per process);
+* :mod:`cosim.sweeps.local_backend` and :mod:`cosim.sweeps.dask_backend`: where the
+  tasks run: the local process pool, or Dask;
+* :mod:`cosim.sweeps.locks`: markers, locks and process liveness (no run twice at once,
+  workers end when the sweep dies);
 * :mod:`cosim.sweeps.results`: row files and ``results.csv`` on disk;
 * :mod:`cosim.sweeps.cli`: ``cosim sweep`` (argparse parser and command).
 
@@ -17,14 +22,7 @@ Python use::
 """
 
 from cosim.sweeps.cli import add_sweep_parser, cmd_sweep, main
-from cosim.sweeps.execute import (
-    CRASH_ENV,
-    TEST_LOG_ENV,
-    RunTask,
-    SweepOutcome,
-    execute_task,
-    run_sweep,
-)
+from cosim.sweeps.execute import SweepOutcome, run_sweep
 from cosim.sweeps.plan import (
     GridPoint,
     SweepPlan,
@@ -35,6 +33,7 @@ from cosim.sweeps.plan import (
     sweep_from_dict,
 )
 from cosim.sweeps.results import read_row, results_frame, write_results, write_row
+from cosim.sweeps.tasks import CRASH_ENV, TEST_LOG_ENV, RunTask, execute_task
 
 __all__ = [
     "CRASH_ENV",

@@ -12,7 +12,8 @@ from pathlib import Path
 
 from cosim.cli.errors import run_command
 from cosim.errors import ConfigError
-from cosim.sweeps.execute import START_METHODS, check_options, check_output, run_sweep
+from cosim.sweeps.execute import check_options, check_output, run_sweep
+from cosim.sweeps.local_backend import START_METHODS
 from cosim.sweeps.plan import default_out_dir, load_sweep
 from cosim.sweeps.results import read_row
 
