@@ -320,8 +320,8 @@ def run_child(task: dict, timeout_s: float = 1800.0) -> dict:
 
 def measure(smoke: bool, seeds: int, attrs: dict | None, log) -> dict[str, pd.DataFrame]:
     """Run every measurement; returns the tables (lane, obstacle, ring, gaps)."""
-    dur = {"lane": (240.0, 120.0) if smoke else (600.0, 300.0),
-           "obstacle": (240.0, 120.0) if smoke else (300.0, 120.0),
+    dur = {"lane": (180.0, 90.0) if smoke else (600.0, 300.0),
+           "obstacle": (180.0, 90.0) if smoke else (300.0, 120.0),
            "ring": (150.0, 90.0) if smoke else (600.0, 300.0)}
     seed_list = list(range(1, 1 + (1 if smoke else seeds)))
     gap_tables = []

@@ -5,7 +5,17 @@ SUMO failing) prints exactly one line ``error: ...`` on stderr, exits with statu
 shows no traceback. A run writes summary.csv, intervals.csv, meta.json (seed and
 versions, SUMO's included) and config.toml, and the same seed gives the same results.
 
-The CLI runs as a subprocess (``python -m cosim.cli.main``), networks in a temporary cache.
+Three ways to run ``cosim``, networks always in the module's temporary cache:
+
+* a subprocess (``python -m cosim.cli.main``, :func:`cosim`): the whole command-line
+  path end to end, interpreter start-up and imports included (~2 s each), so only for a
+  few cases: a config error, a missing scenario file and the run whose outputs are read;
+* this test process (``cosim.cli.main.main``, fixture ``cosim_here``): every error raised
+  before SUMO starts, with stdout and stderr captured at the file descriptors as a
+  subprocess's pipes would be; SUMO's world is replaced by a tripwire there, since
+  libsumo keeps global state and every SUMO simulation needs a process of its own;
+* a child forked from a server with cosim loaded (:func:`cosim_forked`,
+  ``sumo_cases/isolated.py``): the cases that start SUMO.
 """
 
 from __future__ import annotations
@@ -19,9 +29,13 @@ import subprocess
 import sys
 import tomllib
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
+from sumo_cases.cli_output import cosim_cli_output
+from sumo_cases.isolated import run_isolated
 
+from cosim.cli.main import main
 from cosim.config.builtins import builtin_scenarios
 from cosim.config.scenario import Scenario, load_scenario, scenario_from_dict
 from cosim.config.toml_write import dumps_toml
@@ -56,8 +70,51 @@ def cli_env(tmp_path_factory) -> dict:
 
 
 def cosim(*args, cwd: Path, env: dict, timeout: float = 180.0):
+    """``cosim ARGS`` as a subprocess (the console path end to end)."""
     return subprocess.run([*COSIM, *map(str, args)], capture_output=True, text=True,
                           cwd=cwd, env=env, timeout=timeout, check=False)
+
+
+def cosim_forked(*args, cwd: Path, env: dict, timeout: float = 180.0) -> SimpleNamespace:
+    """``cosim ARGS`` in a process of its own forked from a server with cosim and libsumo
+    loaded (for cases that start SUMO); its exit status, stdout and stderr as
+    :func:`cosim` gives them."""
+    code, out, err = run_isolated(cosim_cli_output, [str(a) for a in args], str(cwd),
+                                  env=env, timeout_s=timeout)
+    return SimpleNamespace(returncode=code, stdout=out, stderr=err)
+
+
+class _SumoStarted(AssertionError):
+    """Raised in place of SUMO's world in this test process."""
+
+
+def _no_sumo_here(*_args, **_kwargs):
+    raise _SumoStarted("this case starts SUMO: run it in a process of its own "
+                       "(cosim_forked), never in the test process")
+
+
+@pytest.fixture
+def cosim_here(tmp_path, monkeypatch, capfd, cli_env):
+    """``cosim ARGS`` in this test process, in ``tmp_path`` with the module's network cache
+    (cwd and environment restored afterwards): for commands that end before SUMO starts
+    (SUMO's world is a tripwire here). Output captured at file descriptors 1 and 2, so
+    anything netconvert or a C library prints counts too."""
+    import cosim.sumo.world
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("COSIM_NETWORK_CACHE", cli_env["COSIM_NETWORK_CACHE"])
+    monkeypatch.setattr(cosim.sumo.world, "SumoWorld", _no_sumo_here)
+
+    def run(*args) -> SimpleNamespace:
+        capfd.readouterr()
+        try:
+            code = main([str(a) for a in args])
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+        out, err = capfd.readouterr()
+        return SimpleNamespace(returncode=int(code or 0), stdout=out, stderr=err)
+
+    return run
 
 
 def assert_one_error_line(proc, *fragments: str) -> str:
@@ -104,48 +161,55 @@ CONFIG_ERRORS = [
     ("bad_toml", "[scenario\nname = 1\n", ["not valid TOML"]),
 ]
 
+#: the config error also checked end to end, as a subprocess (the others in-process)
+END_TO_END_CONFIG_ERROR = "unknown_key"
 
-@pytest.mark.parametrize(("text", "fragments"), [c[1:] for c in CONFIG_ERRORS],
+
+@pytest.mark.parametrize(("name", "text", "fragments"), CONFIG_ERRORS,
                          ids=[c[0] for c in CONFIG_ERRORS])
-def test_config_error_is_one_line_exit_2(tmp_path, cli_env, text, fragments):
+def test_config_error_is_one_line_exit_2(tmp_path, cli_env, cosim_here, name, text, fragments):
     (tmp_path / "s.toml").write_text(text)
-    proc = cosim("run", "s.toml", "--quiet", "--out", tmp_path / "out", cwd=tmp_path,
-                 env=cli_env)
+    args = ("run", "s.toml", "--quiet", "--out", tmp_path / "out")
+    if name == END_TO_END_CONFIG_ERROR:
+        proc = cosim(*args, cwd=tmp_path, env=cli_env)
+    else:
+        proc = cosim_here(*args)
     assert_one_error_line(proc, *fragments)
     assert proc.stdout == ""  # rejected before anything ran
     assert not (tmp_path / "out").exists()
 
 
-def test_missing_network_file(tmp_path, cli_env):
+def test_missing_network_file(tmp_path, cosim_here):
     toml = _file_scenario(tmp_path, "missing.net.xml", None)
-    proc = cosim("run", toml, "--quiet", "--out", tmp_path / "out", cwd=tmp_path, env=cli_env)
+    proc = cosim_here("run", toml, "--quiet", "--out", tmp_path / "out")
     assert_one_error_line(proc, "network file not found", "missing.net.xml")
     assert not (tmp_path / "out").exists()
 
 
-def test_corrupt_network_file(tmp_path, cli_env):
+def test_corrupt_network_file(tmp_path, cosim_here):
     toml = _file_scenario(tmp_path, "corrupt.net.xml", "this is not <xml at all")
-    proc = cosim("run", toml, "--quiet", "--out", tmp_path / "out", cwd=tmp_path, env=cli_env)
+    proc = cosim_here("run", toml, "--quiet", "--out", tmp_path / "out")
     assert_one_error_line(proc, "cannot read network", "corrupt.net.xml")
     assert not (tmp_path / "out").exists()
 
 
-def test_missing_scenario_file_and_unknown_name(tmp_path, cli_env):
-    proc = cosim("run", "nowhere.toml", cwd=tmp_path, env=cli_env)
+def test_missing_scenario_file_and_unknown_name(tmp_path, cli_env, cosim_here):
+    proc = cosim("run", "nowhere.toml", cwd=tmp_path, env=cli_env)  # end to end
     assert_one_error_line(proc, "scenario file not found")
-    proc = cosim("run", "no_such_builtin", cwd=tmp_path, env=cli_env)
+    proc = cosim_here("run", "no_such_builtin")
     assert_one_error_line(proc, "no_such_builtin", "cosim list")
 
 
 @pytest.mark.sumo
-def test_sumo_refusing_the_routes_is_one_line(tmp_path, cli_env, straight_net_xml):
-    """A lane speed of -5 m/s passes our checks; SUMO refuses the route file it leads to
-    (negative speedFactor) when it starts."""
+def test_a_negative_lane_speed_is_one_line(tmp_path, cli_env, straight_net_xml):
+    """A lane speed of -5 m/s in a user's network: the network check refuses it (the edge's
+    speed limit must be > 0 m/s) before SUMO starts; forked, in case it ever got to SUMO."""
     text = straight_net_xml.replace('speed="40.00"', 'speed="-5.00"')
     assert text != straight_net_xml
     toml = _file_scenario(tmp_path, "neg.net.xml", text)
-    proc = cosim("run", toml, "--quiet", "--out", tmp_path / "out", cwd=tmp_path, env=cli_env)
-    assert_one_error_line(proc)
+    proc = cosim_forked("run", toml, "--quiet", "--out", tmp_path / "out", cwd=tmp_path,
+                        env=cli_env)
+    assert_one_error_line(proc, "speed limit")
 
 
 @pytest.mark.sumo
@@ -154,31 +218,32 @@ def test_sumo_refusing_the_network_is_one_line(tmp_path, cli_env, straight_net_x
     ("Unknown from-node 'start' for edge 'main'")."""
     text = "\n".join(ln for ln in straight_net_xml.splitlines() if "<junction " not in ln)
     toml = _file_scenario(tmp_path, "nojunction.net.xml", text)
-    proc = cosim("run", toml, "--quiet", "--out", tmp_path / "out", cwd=tmp_path, env=cli_env)
+    proc = cosim_forked("run", toml, "--quiet", "--out", tmp_path / "out", cwd=tmp_path,
+                        env=cli_env)
     assert_one_error_line(proc, "start")
 
 
-def test_zero_lane_speed_network_is_one_line(tmp_path, cli_env, straight_net_xml):
+def test_zero_lane_speed_network_is_one_line(tmp_path, cosim_here, straight_net_xml):
     text = straight_net_xml.replace('speed="40.00"', 'speed="0.00"')
     toml = _file_scenario(tmp_path, "zero.net.xml", text)
-    proc = cosim("run", toml, "--quiet", "--out", tmp_path / "out", cwd=tmp_path, env=cli_env)
+    proc = cosim_here("run", toml, "--quiet", "--out", tmp_path / "out")
     assert_one_error_line(proc, "speed")
 
 
 @pytest.mark.sumo
 def test_scenario_without_traffic_runs(tmp_path, cli_env):
     (tmp_path / "s.toml").write_text(TINY.replace("inflow_vph = 1800.0", "inflow_vph = 0.0"))
-    proc = cosim("run", "s.toml", "--quiet", "--out", tmp_path / "out", cwd=tmp_path,
-                 env=cli_env)
+    proc = cosim_forked("run", "s.toml", "--quiet", "--out", tmp_path / "out", cwd=tmp_path,
+                        env=cli_env)
     assert proc.returncode == 0, proc.stderr
     assert (tmp_path / "out" / "summary.csv").is_file()
 
 
 @pytest.mark.sumo
-def test_measurement_zone_beyond_the_road_is_a_config_error(tmp_path, cli_env):
+def test_measurement_zone_beyond_the_road_is_a_config_error(tmp_path, cosim_here):
+    """Refused once the network is built, before SUMO starts."""
     (tmp_path / "s.toml").write_text(TINY + "\n[outputs]\nzone_start_m = 500.0\n")
-    proc = cosim("run", "s.toml", "--quiet", "--out", tmp_path / "out", cwd=tmp_path,
-                 env=cli_env)
+    proc = cosim_here("run", "s.toml", "--quiet", "--out", tmp_path / "out")
     assert_one_error_line(proc, "zone_start_m")
 
 
@@ -187,8 +252,8 @@ def test_measurement_zone_beyond_the_road_is_a_config_error(tmp_path, cli_env):
 # --------------------------------------------------------------------------------------
 
 
-def test_cosim_list(tmp_path, cli_env):
-    proc = cosim("list", cwd=tmp_path, env=cli_env)
+def test_cosim_list(cosim_here):
+    proc = cosim_here("list")
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == ""
     names = set(builtin_scenarios())
@@ -215,13 +280,15 @@ def test_console_script_is_installed(tmp_path, cli_env):
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory, cli_env) -> dict:
-    """The tiny scenario run three times: seed 7 twice, seed 8 once."""
+    """The tiny scenario run three times: seed 7 twice, seed 8 once; the first run as a
+    subprocess (the console path end to end), the other two forked (SUMO starts in each:
+    a process of its own), so the same seed is also compared across the two."""
     root = tmp_path_factory.mktemp("runs")
     (root / "tiny.toml").write_text(TINY)
     out = {}
-    for name, seed in (("a", 7), ("b", 7), ("c", 8)):
-        proc = cosim("run", "tiny.toml", "--seed", seed, "--quiet", "--out", root / name,
-                     cwd=root, env=cli_env)
+    for name, seed, run in (("a", 7, cosim), ("b", 7, cosim_forked), ("c", 8, cosim_forked)):
+        proc = run("run", "tiny.toml", "--seed", seed, "--quiet", "--out", root / name,
+                   cwd=root, env=cli_env)
         assert proc.returncode == 0, proc.stderr
         out[name] = (root / name, proc)
     out["toml"] = root / "tiny.toml"

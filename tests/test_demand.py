@@ -1,17 +1,21 @@
-"""Tests of cosim.demand: route files, their randomness and SUMO's reading of them."""
+"""Tests of cosim.demand: route files, their randomness and SUMO's reading of them.
+
+SUMO runs (libsumo: one simulation per process) each run in a process of their own,
+forked by ``sumo_cases/isolated.py`` (``sumo_cases/demand_cases.py``, ``run_case.main``).
+"""
 
 from __future__ import annotations
 
 import json
 import os
 import subprocess
-import sys
-import textwrap
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
 import pytest
+from sumo_cases import demand_cases, run_case
+from sumo_cases.isolated import run_isolated
 
 from cosim.demand.plan import KIND_BLOCK, arrival_times, plan_vehicles
 from cosim.demand.routes import write_routes
@@ -49,19 +53,11 @@ def _vtypes(path: Path) -> dict[str, ET.Element]:
     return {v.get("id"): v for v in ET.parse(path).getroot().iter("vType")}
 
 
-def run_python(code: str, timeout: float = 60.0) -> dict:
-    """Run ``code`` in a fresh interpreter; it prints one JSON object as its last line."""
-    env = {**os.environ, "PYTHONPATH": str(REPO)}
-    proc = subprocess.run(
-        [sys.executable, "-c", textwrap.dedent(code)],
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        env=env,
-        check=False,
-    )
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+def _run_case(out_dir: Path, spec: dict, env: dict, timeout: float = 300.0) -> dict:
+    """``sumo_cases/run_case.py``'s result for ``spec``, run in a process of its own."""
+    result = run_isolated(run_case.main, str(out_dir), json.dumps(spec), env=env,
+                          timeout_s=timeout)
+    return json.loads(json.dumps(result))  # as the RESULT line would carry it
 
 
 # --------------------------------------------------------------------------------------
@@ -341,12 +337,7 @@ def test_dense_ring_starts_without_collision_in_sumo(tmp_path: Path) -> None:
     }
     env = {**os.environ, "PYTHONPATH": str(REPO),
            "COSIM_NETWORK_CACHE": str(tmp_path / "nets")}
-    proc = subprocess.run([sys.executable, str(REPO / "tests" / "sumo_cases" / "run_case.py"),
-                           str(tmp_path / "out"), json.dumps(spec)], capture_output=True,
-                          text=True, env=env, timeout=300, check=False)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    line = [x for x in proc.stdout.splitlines() if x.startswith("RESULT ")][-1]
-    s = json.loads(line[len("RESULT "):])["summary"]
+    s = _run_case(tmp_path / "out", spec, env)["summary"]
     assert s["vehicles_inserted"] == 225
     assert s["collisions_sumo_cav"] == 0 and s["collisions_sumo_hdv_only"] == 0
     assert s["collisions_geometric_cav"] == 0 and s["collisions_geometric_hdv_only"] == 0
@@ -356,34 +347,9 @@ def test_dense_ring_starts_without_collision_in_sumo(tmp_path: Path) -> None:
 def test_sumo_inserts_the_whole_ring_at_t0_and_keeps_it(ring: RoadNetwork, tmp_path: Path) -> None:
     demand = DemandSpec(ring_density_vpkm=40.0)
     info = write_routes(ring, demand, seed=9, path=tmp_path / "ring.rou.xml", horizon_s=60.0)
-    out = run_python(f"""
-        import json
-        import xml.etree.ElementTree as ET
-        import libsumo as t
-        from cosim.road import NetworkSpec, build_network
-        net = build_network(NetworkSpec(kind="ring", circumference_m=300.0),
-                            {str(Path(ring.net_file).parents[1])!r})
-        t.start(["sumo", "-n", str(net.net_file), "-r", {str(info.path)!r}, "--no-step-log",
-                 "true", "--lateral-resolution", "0.8", "--step-length", "0.1", "--seed", "9",
-                 "--collision.action", "warn"])
-        t.simulationStep()
-        n0 = t.vehicle.getIDCount()
-        xml = {{v.get("id"): v for v in ET.parse({str(info.path)!r}).getroot().iter("vehicle")}}
-        pos_err = max(abs(t.vehicle.getLanePosition(v) - float(xml[v].get("departPos")))
-                      for v in t.vehicle.getIDList())
-        lat_err = max(abs(t.vehicle.getLateralLanePosition(v) - float(xml[v].get("departPosLat")))
-                      for v in t.vehicle.getIDList())
-        factor = max(abs(t.vehicle.getSpeedFactor(v) - float(xml[v].get("speedFactor")))
-                     for v in t.vehicle.getIDList())
-        collisions = 0
-        for _ in range(600):
-            t.simulationStep()
-            collisions += t.simulation.getCollidingVehiclesNumber()
-        print(json.dumps({{"n0": n0, "n60": t.vehicle.getIDCount(), "pos_err": pos_err,
-                          "lat_err": lat_err, "factor": factor, "collisions": collisions,
-                          "arrived": t.simulation.getArrivedNumber()}}))
-        t.close()
-    """)
+    out = run_isolated(demand_cases.ring_insertion, str(Path(ring.net_file).parents[1]),
+                       str(info.path), env={**os.environ, "PYTHONPATH": str(REPO)},
+                       timeout_s=60.0)
     assert out["n0"] == info.n_ring == 12
     assert out["pos_err"] < 1e-9 and out["lat_err"] < 1e-9 and out["factor"] < 1e-9
     assert out["n60"] == info.n_ring and out["arrived"] == 0
@@ -586,33 +552,14 @@ def test_sumo_reads_the_human_driver_attributes(
     lanes_net = build_network(NetworkSpec(kind="three_lane", length_m=200.0), cache)
     laned = write_routes(lanes_net, DemandSpec(cav_share=0.0, inflow_vph=3600.0), 3,
                          tmp_path / "lanes.rou.xml", horizon_s=30.0)
-    out = run_python(f"""
-        import json
-        import libsumo as t
-        res = {{}}
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    out = {  # each file in a SUMO of its own
+        name: run_isolated(demand_cases.human_driver_attributes, str(net), str(routes), extra,
+                           env=env, timeout_s=60.0)
         for name, net, routes, extra in (
-                ("free", {str(straight.net_file)!r}, {str(free.path)!r},
-                 ["--lateral-resolution", "0.8"]),
-                ("lanes", {str(lanes_net.net_file)!r}, {str(laned.path)!r}, [])):
-            t.start(["sumo", "-n", net, "-r", routes, "--no-step-log", "true",
-                     "--step-length", "0.1", *extra])
-            while t.vehicle.getIDCount() == 0:
-                t.simulationStep()
-            vid = t.vehicle.getIDList()[0]
-            typ = t.vehicle.getTypeID(vid)
-            lc = {{}}
-            for key in ("lcPushy", "lcAssertive", "lcTimeToImpatience"):
-                try:
-                    lc[key] = float(t.vehicle.getParameter(vid, "laneChangeModel." + key))
-                except Exception:
-                    lc[key] = None
-            res[name] = {{"tau": t.vehicletype.getTau(typ),
-                         "minGapLat": t.vehicletype.getMinGapLat(typ),
-                         "maxSpeedLat": t.vehicletype.getMaxSpeedLat(typ),
-                         "imperfection": t.vehicletype.getImperfection(typ), **lc}}
-            t.close()
-        print(json.dumps(res))
-    """)
+            ("free", straight.net_file, free.path, ["--lateral-resolution", "0.8"]),
+            ("lanes", lanes_net.net_file, laned.path, []))
+    }
     free_hdv = out["free"]
     assert free_hdv["tau"] == pytest.approx(spec.HDV_TAU_S)
     assert free_hdv["imperfection"] == pytest.approx(spec.HDV_SIGMA)
@@ -625,7 +572,7 @@ def test_sumo_reads_the_human_driver_attributes(
 
 
 @pytest.mark.sumo
-@pytest.mark.slow(seconds=4.5)
+@pytest.mark.slow(seconds=3)
 def test_human_drivers_get_around_a_stopped_vehicle(tmp_path: Path) -> None:
     """Issue 12's obstacle, human drivers only: a stopped vehicle 5 m x 3.4 m covering the
     right third of a 1 km x 10.2 m road at s = 550 m, 4 000 veh/h. With SUMO's default
@@ -642,12 +589,7 @@ def test_human_drivers_get_around_a_stopped_vehicle(tmp_path: Path) -> None:
     }
     env = {**os.environ, "PYTHONPATH": str(REPO),
            "COSIM_NETWORK_CACHE": str(tmp_path / "nets")}
-    proc = subprocess.run([sys.executable, str(REPO / "tests" / "sumo_cases" / "run_case.py"),
-                           str(tmp_path / "out"), json.dumps(case)], capture_output=True,
-                          text=True, env=env, timeout=300, check=False)
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    line = [x for x in proc.stdout.splitlines() if x.startswith("RESULT ")][-1]
-    s = json.loads(line[len("RESULT "):])["summary"]
+    s = _run_case(tmp_path / "out", case, env)["summary"]
     assert s["max_standstill_s"] <= 30.0 and s["vehicles_stopped_long"] == 0
     assert s["collisions_sumo_hdv_only"] == 0
     import pandas as pd
@@ -657,7 +599,7 @@ def test_human_drivers_get_around_a_stopped_vehicle(tmp_path: Path) -> None:
 
 
 @pytest.mark.sumo
-@pytest.mark.slow(seconds=4.5)
+@pytest.mark.slow(seconds=3.5)
 def test_one_lane_carries_2000_to_2400_vph_with_the_calibrated_drivers() -> None:
     """Road-limited lane capacity of the three-lane baseline: on a 1 km ring of three
     3.4 m lanes (no entrance) with LC2013 human drivers, Edie's flow per lane near the
@@ -667,12 +609,9 @@ def test_one_lane_carries_2000_to_2400_vph_with_the_calibrated_drivers() -> None
     for k in (24.0, 27.0):
         task = {"kind": "lane_ring", "k_lane_vpkm": k, "seed": 1, "length_m": 1000.0,
                 "lanes": 3, "lane_width_m": 3.4, "duration_s": 600.0, "warmup_s": 300.0}
-        proc = subprocess.run(
-            [sys.executable, str(REPO / "experiments" / "calibrate_humans.py"), "--child",
-             json.dumps(task)], capture_output=True, text=True, timeout=300, check=False,
-            env={**os.environ, "PYTHONPATH": str(REPO)})
-        assert proc.returncode == 0, proc.stderr[-2000:]
-        r = json.loads([x for x in proc.stdout.splitlines() if x.startswith("RESULT ")][-1][7:])
+        # calibrate_humans.py --child TASK, in a process of its own
+        r = run_isolated(demand_cases.calibrate_humans_child, task,
+                         env={**os.environ, "PYTHONPATH": str(REPO)}, timeout_s=300.0)
         assert r["collision_vehicles"] == 0
         flows.append(r["q_lane_vph"])
     assert 2000.0 <= max(flows) <= 2400.0, flows

@@ -1,7 +1,8 @@
 """Our traffic metrics agree with SUMO's own detectors on the same run.
 
-The SUMO case runs ``experiments/check_detectors.py --quick`` in a subprocess
-(libsumo holds one simulation per process): 500 m x 10.2 m road built as three
+The SUMO case runs ``experiments/check_detectors.py --quick`` in a process of its own
+(libsumo holds one simulation per process; ``sumo_cases/detector_case.py``, forked by
+``sumo_cases/isolated.py``): 500 m x 10.2 m road built as three
 edges (100 + 300 + 100 m) so the 300 m middle edge is the Edie zone, 2400 veh/h,
 50 % CAVs under flocking control, 180 s, warm-up 60 s, 60 s intervals (aligned
 with SUMO's detector periods). The parser tests need no SUMO.
@@ -9,18 +10,15 @@ with SUMO's detector periods). The parser tests need no SUMO.
 
 from __future__ import annotations
 
-import json
 import os
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from sumo_cases.detector_case import check_detectors_quick
+from sumo_cases.isolated import run_isolated
 
 from cosim.sumo.outputs import e1_sections, read_e1, read_meandata, window
 
-ROOT = Path(__file__).resolve().parents[1]
 TOL = 0.02  # the issue's agreement target: 2 %
 
 
@@ -97,14 +95,8 @@ def agreement(tmp_path_factory) -> dict:
     env = dict(os.environ)
     env["COSIM_NETWORK_CACHE"] = str(tmp_path_factory.mktemp("network_cache"))
     out = tmp_path_factory.mktemp("check_detectors") / "run"
-    proc = subprocess.run(
-        [sys.executable, str(ROOT / "experiments" / "check_detectors.py"), "--quick",
-         "--json", "--out", str(out)],
-        capture_output=True, text=True, env=env, timeout=300, check=False,
-    )
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    line = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")][-1]
-    return json.loads(line[len("RESULT "):])
+    # check_detectors.py --quick --json --out OUT, in a process of its own
+    return run_isolated(check_detectors_quick, str(out), env=env, timeout_s=300.0)
 
 
 @pytest.mark.sumo

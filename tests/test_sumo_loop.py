@@ -2,27 +2,24 @@
 boundary violations are seen by SUMO and by our metrics, the ring wraps, vehicles are
 conserved, and the safety layer keeps dense CAV traffic collision-free.
 
-libsumo holds one simulation per process: every case runs in its own process
-(``tests/sumo_cases/world_cases.py`` as a subprocess that prints ``RESULT <json>``;
-scenarios through ``run_case.main``, forked by ``sumo_cases/isolated.py``), with networks
-built in a temporary cache. Numbers: 0.1 s steps, cars 4.5 m x 1.8 m, a 10.2 m wide road.
+libsumo holds one simulation per process: every case runs in its own process, forked by
+``sumo_cases/isolated.py`` (``sumo_cases/world_cases.py``'s cases through
+``world_cases.run``, scenarios through ``run_case.main``), with networks built in a
+temporary cache. Numbers: 0.1 s steps, cars 4.5 m x 1.8 m, a 10.2 m wide road.
 """
 
 from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
-from sumo_cases import run_case
+from sumo_cases import run_case, world_cases
 from sumo_cases.isolated import run_isolated
 
 pytestmark = pytest.mark.sumo
 
-CASES = Path(__file__).resolve().parent / "sumo_cases"
 DT = 0.1
 
 
@@ -33,25 +30,15 @@ def sumo_env(tmp_path_factory) -> dict:
     return env
 
 
-def _run(script: str, *args: str, env: dict, timeout: float = 240.0) -> dict:
-    proc = subprocess.run(
-        [sys.executable, str(CASES / script), *args],
-        capture_output=True, text=True, env=env, timeout=timeout, check=False,
-    )
-    assert proc.returncode == 0, f"{script} {args} failed:\n{proc.stderr[-3000:]}"
-    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
-    assert lines, f"no RESULT line from {script}:\n{proc.stdout[-2000:]}"
-    return json.loads(lines[-1][len("RESULT "):])
-
-
 @pytest.fixture(scope="module")
 def world_case(sumo_env):
-    """Run a tests/sumo_cases/world_cases.py case once per module; cached."""
+    """Run a tests/sumo_cases/world_cases.py case once per module, in a process of its
+    own (``world_cases.run``: the result as its RESULT line would carry it); cached."""
     cache: dict[str, dict] = {}
 
     def get(name: str) -> dict:
         if name not in cache:
-            cache[name] = _run("world_cases.py", name, env=sumo_env)
+            cache[name] = run_isolated(world_cases.run, name, env=sumo_env, timeout_s=240.0)
         return cache[name]
 
     return get

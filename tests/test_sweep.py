@@ -3,6 +3,12 @@ recovery and --resume, the shipped sweep files, and the Dask executor.
 
 SUMO runs happen only in worker processes (the process pool or Dask's workers); the
 tests marked ``sumo`` use a tiny scenario: a 300 m road, 20 s, one 5 s interval each.
+A run's process costs more than its simulation (a spawned worker imports cosim, libsumo
+and the numba kernels: ~2 s of CPU, the 20 s run ~0.3 s), so the sweeps of several runs
+go through :func:`_cli_sweep`: ``cosim sweep --start-method forkserver`` in a process of
+its own, whose runs are forked from one server that imported all of it once (and that
+inherits the test's environment, which the workers read: the network cache, the
+test-only hooks).
 """
 
 from __future__ import annotations
@@ -280,8 +286,20 @@ def _results(out: Path) -> pd.DataFrame:
     return pd.read_csv(out / "results.csv").set_index("run_id")
 
 
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _cli_sweep(*args: str) -> subprocess.CompletedProcess:
+    """``cosim sweep ARGS --start-method forkserver`` in a new process (the environment
+    inherited): one import of cosim for all of the sweep's runs, each still in a process
+    of its own. Exit status and output in the result."""
+    cmd = [sys.executable, "-m", "cosim.cli.main", "sweep", *args,
+           "--start-method", "forkserver"]
+    return subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=600)
+
+
 @pytest.mark.sumo
-@pytest.mark.slow(seconds=7)
+@pytest.mark.slow(seconds=8)
 def test_a_dying_worker_loses_no_finished_run_and_resume_completes(
     tmp_path, sumo_env, monkeypatch, capsys
 ):
@@ -294,8 +312,11 @@ def test_a_dying_worker_loses_no_finished_run_and_resume_completes(
     victim = ids[1]
     out = tmp_path / "out"
     monkeypatch.setenv(sw.CRASH_ENV, victim)
-    assert sw.main([str(f), "--out", str(out), "--workers", "2", "--quiet"]) == 1
-    assert "1 run failed" in capsys.readouterr().out
+    # the runs forked from one preloaded server (up to four worker processes: the victim,
+    # its neighbour and the runs re-run after the pool broke); --resume below spawns its run
+    first = _cli_sweep(str(f), "--out", str(out), "--workers", "2", "--quiet")
+    assert first.returncode == 1, first.stderr
+    assert "1 run failed" in first.stdout
     res = _results(out)
     assert list(res.index) == ids
     assert res.loc[victim, "status"] == "failed"
@@ -338,6 +359,7 @@ def test_a_dying_worker_loses_no_finished_run_and_resume_completes(
 
 
 @pytest.mark.sumo
+@pytest.mark.slow(seconds=4)
 def test_a_failing_run_is_recorded_and_the_others_continue(tmp_path, sumo_env):
     """A run that raises (here: a ring too dense to place its vehicles) is a failed row."""
     f = _write(tmp_path, """
@@ -353,8 +375,9 @@ network.circumference_m = 300.0
 "demand.ring_density_vpkm" = [30.0, 2000.0]
 """)
     out = tmp_path / "out"
-    outcome = sw.run_sweep(sw.load_sweep(f), out, workers=2, progress=False)
-    assert (outcome.n_ok, outcome.n_failed) == (1, 1)
+    done = _cli_sweep(str(f), "--out", str(out), "--workers", "2", "--quiet")
+    assert done.returncode == 1, done.stderr
+    assert "2 runs in " in done.stdout and ": 1 ok, 1 failed" in done.stdout  # the counts
     res = pd.read_csv(out / "results.csv")
     bad = res[res["status"] == "failed"].iloc[0]
     assert bad["demand.ring_density_vpkm"] == 2000.0
@@ -366,11 +389,14 @@ network.circumference_m = 300.0
 @pytest.mark.sumo
 @pytest.mark.slow(seconds=7)
 def test_the_sweep_runs_on_a_local_dask_cluster(tmp_path, sumo_env):
-    """LocalCluster with 2 worker processes; each run in a subprocess of a Dask worker."""
+    """A LocalCluster of one worker process (each extra one costs ~1 s of CPU to start);
+    each run in a subprocess of it: the two runs go through the same long-lived worker,
+    one after the other (libsumo's one simulation per process holds because each run is
+    a subprocess of its own)."""
     pytest.importorskip("distributed")
     f = _write(tmp_path, TINY.replace("[1500.0, 3000.0, 4500.0]", "[1500.0, 3000.0]"))
     out = tmp_path / "out"
-    assert sw.main([str(f), "--out", str(out), "--dask-local", "2", "--quiet"]) == 0
+    assert sw.main([str(f), "--out", str(out), "--dask-local", "1", "--quiet"]) == 0
     res = _results(out)
     assert len(res) == 2 and (res["status"] == "ok").all()
     assert (res["edie_flow_vph"] > 0).all()
@@ -484,7 +510,7 @@ def test_resume_refuses_while_a_run_is_still_held_by_a_live_process(tmp_path, mo
     resume waits IN_FLIGHT_WAIT_S, then refuses without touching the folder."""
     from cosim.sweeps import execute, locks
 
-    monkeypatch.setattr(execute, "IN_FLIGHT_WAIT_S", 0.5)
+    monkeypatch.setattr(execute, "IN_FLIGHT_WAIT_S", 0.2)
     f = _write(tmp_path, TINY)
     plan = sw.load_sweep(f)
     out = tmp_path / "out"
@@ -513,6 +539,7 @@ def test_resume_refuses_while_a_run_is_still_held_by_a_live_process(tmp_path, mo
 
 
 @pytest.mark.sumo
+@pytest.mark.slow(seconds=2.5)
 def test_replace_clears_the_old_sweep_and_runs_again(tmp_path, sumo_env, capsys):
     f = _write(tmp_path, TINY.replace("[1500.0, 3000.0, 4500.0]", "[1500.0]"))
     out = tmp_path / "out"
@@ -541,8 +568,10 @@ def _log(path: Path) -> list[tuple[str, str, int, float]]:
 
 
 @pytest.mark.sumo
-@pytest.mark.parametrize("start_method", ["spawn", "forkserver"])
-@pytest.mark.slow(seconds=8)
+@pytest.mark.parametrize("start_method", [
+    pytest.param("spawn", marks=pytest.mark.slow(seconds=5)),
+    pytest.param("forkserver", marks=pytest.mark.slow(seconds=7)),
+])
 def test_killing_the_sweep_ends_its_workers_and_resume_runs_each_run_once(
     tmp_path, sumo_env, monkeypatch, start_method
 ):
@@ -551,17 +580,21 @@ def test_killing_the_sweep_ends_its_workers_and_resume_runs_each_run_once(
     a --resume started at once completes the grid, and no run ran twice at a time."""
     from cosim.sweeps.locks import process_alive
 
-    repo = Path(__file__).resolve().parents[1]
-    # two runs, long enough (150 s simulated, about 2 s of wall time) to be killed in flight
-    f = _write(tmp_path, TINY.replace("duration_s = 20.0", "duration_s = 150.0")
+    # two runs, long enough to be killed in flight: a forked run starts simulating at once
+    # (150 s simulated: ~0.8 s of wall time from both starts to the first end); a spawned
+    # one logs its start before it imports the simulator and loads the kernels (~1.5 s),
+    # so TINY's 20 s keep it in flight as long (~1.8 s) and cost the resume less
+    duration = {"forkserver": "150.0", "spawn": "20.0"}[start_method]
+    f = _write(tmp_path, TINY.replace("duration_s = 20.0", f"duration_s = {duration}")
                .replace("[1500.0, 3000.0, 4500.0]", "[1500.0, 3000.0]"))
     out = tmp_path / "out"
     log = tmp_path / "log.txt"
     monkeypatch.setenv(sw.TEST_LOG_ENV, str(log))
-    cmd = [sys.executable, "-m", "cosim.cli.main", "sweep", str(f), "--out", str(out),
-           "--workers", "2", "--quiet", "--start-method", start_method]
-    parent = subprocess.Popen(cmd, cwd=repo, stdout=subprocess.DEVNULL,
-                              stderr=subprocess.DEVNULL, start_new_session=True)
+    sweep = [sys.executable, "-m", "cosim.cli.main", "sweep", str(f), "--out", str(out),
+             "--workers", "2", "--quiet"]
+    parent = subprocess.Popen(sweep + ["--start-method", start_method], cwd=REPO,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                              start_new_session=True)
     deadline = time.monotonic() + 120
     while sum(e == "start" for e, *_ in _log(log)) < 2:
         assert time.monotonic() < deadline, "the runs did not start"
@@ -573,8 +606,10 @@ def test_killing_the_sweep_ends_its_workers_and_resume_runs_each_run_once(
     orphans = {pid: rid for e, rid, pid, _ in _log(log) if e == "start"}
     assert len(orphans) == 2
 
-    resume = subprocess.Popen(cmd + ["--resume"], cwd=repo, stdout=subprocess.PIPE,
-                              stderr=subprocess.PIPE, text=True)
+    # the resume forks its runs from a preloaded server whichever way the killed sweep
+    # started them (what is tested here is which runs it runs, not how it starts them)
+    resume = subprocess.Popen(sweep + ["--start-method", "forkserver", "--resume"], cwd=REPO,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     while any(process_alive(pid) for pid in orphans):
         assert time.time() - t_kill < 5.0, "workers still running 5 s after their sweep died"
         time.sleep(0.05)
@@ -671,11 +706,12 @@ def test_a_parameter_the_grid_points_kind_lacks_is_one_line(text, message):
         _plan(text)
 
 
-@pytest.mark.slow(seconds=7)
+@pytest.mark.slow(seconds=3.5)
 def test_a_sweep_of_two_kinds_fills_each_kinds_parameter_column(tmp_path, sumo_env):
     f = _write(tmp_path, KINDS_SWEEP)
     out = tmp_path / "out"
-    assert sw.main([str(f), "--out", str(out), "--workers", "2", "--quiet"]) == 0
+    done = _cli_sweep(str(f), "--out", str(out), "--workers", "2", "--quiet")
+    assert done.returncode == 0, done.stderr
     res = pd.read_csv(out / "results.csv").set_index("variant")
     assert list(res.index) == list(_KIND_PARAMS) and (res["status"] == "ok").all()
     for variant, (kind, col, value) in _KIND_PARAMS.items():

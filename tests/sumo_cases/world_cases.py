@@ -1,11 +1,13 @@
 """SUMO cases that drive :class:`cosim.sumo.world.SumoWorld` directly (one case per process).
 
-Usage: ``python world_cases.py CASE``; prints one line ``RESULT <json>`` on stdout.
-libsumo holds one simulation per process, so the tests run every case in its own
-subprocess. Networks are built in ``$COSIM_NETWORK_CACHE`` (the tests point it at a
-temporary directory). Every vehicle here is a CAV (vType id ``cav_t``) taken over
-after its first step (speed mode 0, lane-change mode 0), so SUMO moves it exactly as
-commanded.
+:func:`run` runs one case by name and returns its result as the JSON the tests read;
+libsumo holds one simulation per process, so the tests call it in a process of its own
+(``run_isolated(world_cases.run, CASE, env=...)``, forked by ``isolated.py``), never in
+the test process. ``python world_cases.py CASE`` does the same as a script and prints
+one line ``RESULT <json>``. Networks are built in ``$COSIM_NETWORK_CACHE`` (the tests
+point it at a temporary directory). Every vehicle here is a CAV (vType id ``cav_t``)
+taken over after its first step (speed mode 0, lane-change mode 0), so SUMO moves it
+exactly as commanded.
 """
 
 from __future__ import annotations
@@ -41,7 +43,8 @@ SUMO_OPTS = [
     "--duration-log.disable", "true",
 ]
 
-WORKDIR = Path(tempfile.mkdtemp(prefix="cosim_case_"))  # removed when the case ends
+#: the running case's scratch directory (route files), made and removed by :func:`run`
+WORKDIR: Path | None = None
 
 VTYPE = (
     f'<vType id="cav_t" vClass="passenger" length="{CAR_L}" width="{CAR_W}" minGap="2.5" '
@@ -428,9 +431,18 @@ CASES = {
     "overhang_seen": case_overhang_seen,
 }
 
-if __name__ == "__main__":
+
+def run(name: str) -> dict:
+    """Case ``name`` of :data:`CASES` (starts SUMO: call it in a process of its own); its
+    result as the ``RESULT`` line carries it (through JSON: tuples become lists)."""
+    global WORKDIR
+    WORKDIR = Path(tempfile.mkdtemp(prefix="cosim_case_"))
     try:
-        result = CASES[sys.argv[1]]()
+        result = CASES[name]()
     finally:
         shutil.rmtree(WORKDIR, ignore_errors=True)
-    print("RESULT " + json.dumps(result))
+    return json.loads(json.dumps(result))
+
+
+if __name__ == "__main__":
+    print("RESULT " + json.dumps(run(sys.argv[1])))
