@@ -9,7 +9,6 @@ built network (a user's ``.net.xml`` is only known then). Each failure is one
 from __future__ import annotations
 
 import dataclasses
-import typing
 from typing import Any
 
 from cosim.errors import ConfigError
@@ -77,13 +76,13 @@ def check_sections(sc: Scenario) -> None:
     (:mod:`cosim.config.schema`); this catches sections built in Python
     (``Scenario(demand=DemandSpec(size_classes=((nan, 1.8, 1.0),)))``).
     """
-    from cosim.config.schema import check_value
+    from cosim.config.schema import check_value, type_hints
 
     for part in dataclasses.fields(sc):
         section = getattr(sc, part.name)
         if not dataclasses.is_dataclass(section):
             continue
-        hints = typing.get_type_hints(type(section))
+        hints = type_hints(type(section))
         for f in dataclasses.fields(section):
             if f.init and f.name in hints:
                 check_value(f"{part.name}.{f.name}", getattr(section, f.name), hints[f.name])

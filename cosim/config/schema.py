@@ -19,6 +19,7 @@ All errors are :class:`~cosim.errors.ConfigError`: one line, naming ``section.ke
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import types
 import typing
@@ -85,12 +86,19 @@ def check_value(where: str, value: Any, hint: Any) -> Any:
     return value
 
 
+@functools.cache
+def type_hints(cls: type) -> dict[str, Any]:
+    """``typing.get_type_hints(cls)``, evaluated once per class (the annotations are strings:
+    evaluating them costs more than checking a table)."""
+    return typing.get_type_hints(cls)
+
+
 def check_table(cls: type, section: str, data: Mapping[str, Any],
                 exclude: frozenset[str] = frozenset()) -> dict[str, Any]:
     """The keys of ``data`` checked against ``cls``'s fields (types, finiteness)."""
     if not isinstance(data, Mapping):
         raise ConfigError(f"[{section}] must be a table")
-    hints = typing.get_type_hints(cls)
+    hints = type_hints(cls)
     known = [n for n in field_names(cls) if n not in exclude]
     out = {}
     for key, value in data.items():
