@@ -32,7 +32,10 @@ recorded again for the lane-free law's congestion rules (hysteresis, announced m
 rows in dense traffic); runs recorded again when CAVs straddling a joint started to move
 sideways with changeSublane (cosim/sumo/world.py); the obstacle law case's commands (not
 its stored observations) replayed again when a CAV behind a stopped car stopped being
-pushed towards it and CAVs gave held-up drivers SUMO's gap behind them (user-drawn roads).
+pushed towards it and CAVs gave held-up drivers SUMO's gap behind them (user-drawn roads);
+the law cases' commands replayed again and the runs recorded again when CAVs started to
+evade human drivers drifting towards them (``EVADE_S``) and to aim a little further clear
+of a stopped obstacle beside their band (``STATIC_CLEAR_M``).
 """
 
 from __future__ import annotations

@@ -67,6 +67,12 @@ def pack(p, long_min: float, long_max: float, lat_speed_max: float, emergency_de
     return np.array(vals, dtype=float)
 
 
+#: A candidate band is free of a stopped obstacle ahead only this much beyond the lateral
+#: gap at which the obstacle leads (``scan_margin_m``, as ``follow_margin_m``), m: a CAV
+#: that reaches a band just clear of it would still follow it, standing behind the car
+#: while it creeps the last centimetres sideways (a user's neck, a stopped car: 31.8 s).
+STATIC_CLEAR_M = 0.15
+
 #: A vehicle behind a mover in its target band goes first (zipper) only when faster than
 #: this, m/s: at a standstill the one ahead goes, or both would wait for each other.
 ZIPPER_MOVING_MPS = 1.0
@@ -277,7 +283,7 @@ def plan(P, rows, frac, lo, hi, current, j, ds, s, d, v, length, width, is_cav, 
                 ds_k = np.mod(ds_k, period)
             g_k = ds_k - 0.5 * (l_i + length[kk])
             if ds_k > 0 and g_k < look:
-                reach_k = 0.5 * (w_i + width[kk]) + P[SCM]
+                reach_k = 0.5 * (w_i + width[kk]) + P[SCM] + STATIC_CLEAR_M
                 for c in range(n_c):
                     if abs(d[kk] - cand[c]) < reach_k:
                         blocked[c] = True
@@ -361,7 +367,9 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
       :data:`BLOCK_REACH_M`) and less than twice the lateral clearance to the side: a CAV
       behind a stopped car, steering for the gap beside it, would be held against the car
       by the traffic passing on the other side (a user's neck with a stopped car: standing
-      for minutes).
+      for minutes). A human driver alongside that drifts towards the CAV bounds it where it
+      will be in :data:`EVADE_S`; a CAV already inside a human driver's clearance moves out
+      of it (within the road's edges and the other side's bound) instead of holding still.
     """
     k2 = j.shape[1]
     u_long = np.empty(n)
@@ -379,6 +387,8 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
         # yield requests and the zipper (its _longitudinal)
         hi = np.inf
         lo = -np.inf
+        hi_human = False  # the bound on that side is a human driver's
+        lo_human = False
         u = P[KV] * (v_des[i] - v_i)
         if np.isfinite(lead_gap[i]):
             u = min(u, _approach(P, lead_gap[i], lead_v[i], v_i))
@@ -413,12 +423,19 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
             v_ok = 0.0 if g_pair < 0 else P[EMBT] + root
             al = al or ((v_follow > v_ok - P[CIM]) and (v_follow > 0.01))
             shift = P[SHC] if j_cav else abs(v_lat[jj]) * dt
+            if not j_cav:  # a human driver drifting towards it: where it will be
+                toward = -v_lat[jj] if ddk > 0 else v_lat[jj]
+                shift = max(shift, toward * EVADE_S)
             need = half_w + P[LC] + shift
             if al:
                 if ddk >= 0:
-                    hi = min(hi, d[jj] - need)
+                    if d[jj] - need < hi:
+                        hi = d[jj] - need
+                        hi_human = not j_cav
                 else:
-                    lo = max(lo, d[jj] + need)
+                    if d[jj] + need > lo:
+                        lo = d[jj] + need
+                        lo_human = not j_cav
             side_gap = abs(ddk) - half_w
             if static[jj] and x > 0 and x - half_l < block_reach and side_gap < P[TWOLC]:
                 if ddk > 0:
@@ -505,6 +522,12 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
             v_lo_e = min(max(-np.sign(d_i - lo_e) * math.sqrt(a2 * abs(d_i - lo_e)), -vmax),
                          vmax)
             v_lo_e = min(v_lo_e, v_hi_e)
+        # inside a human driver's clearance (it moved towards the CAV): move out of it,
+        # within the road's edges and the other side's bound
+        if hi_human and hi < d_i:
+            v_hi_n = max(-min(math.sqrt(a2 * (d_i - hi)), vmax), v_lo_e)
+        if lo_human and lo > d_i:
+            v_lo_n = min(min(math.sqrt(a2 * (lo - d_i)), vmax), v_hi_e)
         want = vl_i + ul * dt
         v_next = min(max(min(max(want, v_lo_e), v_hi_e), v_lo_n), v_hi_n)
         if v_lo_n > v_hi_n:
@@ -529,6 +552,9 @@ def linspace01(num):
 #: whose centre is within this of its side (the band it merges into, not the one beyond),
 #: m, and the gap they keep behind it is larger by SUMO's ``minGap`` (2.5 m) plus 0.5 m:
 #: SUMO's driver changes its lateral position only with that gap to its follower there.
+#: s: a human driver alongside that drifts towards a CAV is given the clearance it will
+#: have taken within this time (its lateral speed towards the CAV times it)
+EVADE_S = 1.0
 HELD_REACH_M = 1.0
 HELD_GAP_M = 3.0
 
