@@ -262,3 +262,32 @@ def test_a_moving_human_that_a_narrowing_will_squeeze_is_seen_where_it_must_go()
     d = law._entering(obs, oq, op, ow, v_lat=np.zeros(3))
     assert d[0] == pytest.approx(3.4 - 0.9 - 0.1)
     assert d[1] == 4.0 and d[2] == 4.0
+
+
+def test_a_cav_moves_out_of_the_way_of_a_human_drifting_towards_it():
+    """A human driver alongside (same speed, 3.2 m to the left: 1.4 m between the bodies)
+    drifting towards the CAV at 1 m/s: the CAV is bounded where the driver will be in
+    EVADE_S (1 s), so it steers away at once, although the driver is not yet inside its
+    clearance; a driver that keeps its line does not move it."""
+    def lateral(v_lat_human):
+        law = LaneFreeFlocking(LaneFreeParams(), RoadContext(dt=DT))
+        obs = _obs([[0.0, 0.0]], [[30.0, 0.0]], [34.0], others_q=[[0.0, 3.2]],
+                   others_p=[[30.0, v_lat_human]])
+        return law.compute(obs)[0, 1]
+
+    assert lateral(-1.0) < -0.1
+    assert lateral(0.0) > -0.1
+
+
+def test_a_cav_stuck_behind_a_stopped_car_moves_in_front_of_a_slow_vehicle_behind():
+    """A 6 m road; a stopped car ahead on the right (never seen moving) leads the CAV c0;
+    the free band beside it is where c1 creeps along 3 m behind c0 at 0.5 m/s. c0 keeps
+    its move announced (it is near its target band but not clear of the car) and moves
+    sideways in front of c1, instead of waiting for a gap that a slow, dense file never
+    opens (a user's neck with a stopped car: CAVs stood over 30 s)."""
+    law = LaneFreeFlocking(LaneFreeParams(), RoadContext(dt=DT))
+    obs = _obs([[0.0, -0.5], [-7.5, 1.6]], [[0.0, 0.0], [0.5, 0.0]], [30.0, 30.0],
+               others_q=[[8.0, -1.0]], others_p=[[0.0, 0.0]], width=6.0)
+    u = law.compute(obs)
+    assert law._target["c0"] > -1.0 + 1.8 + 0.35  # a band the car does not lead
+    assert u[0, 1] > 0.1  # steers for it now

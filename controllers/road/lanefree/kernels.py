@@ -73,6 +73,10 @@ def pack(p, long_min: float, long_max: float, lat_speed_max: float, emergency_de
 #: while it creeps the last centimetres sideways (a user's neck, a stopped car: 31.8 s).
 STATIC_CLEAR_M = 0.15
 
+#: A CAV stuck behind a stopped obstacle moves sideways in front of a vehicle behind it
+#: slower than ZIPPER_MOVING_MPS with at least this bumper gap, m.
+STUCK_GAP_M = 1.0
+
 #: A vehicle behind a mover in its target band goes first (zipper) only when faster than
 #: this, m/s: at a standstill the one ahead goes, or both would wait for each other.
 ZIPPER_MOVING_MPS = 1.0
@@ -370,6 +374,10 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
       for minutes). A human driver alongside that drifts towards the CAV bounds it where it
       will be in :data:`EVADE_S`; a CAV already inside a human driver's clearance moves out
       of it (within the road's edges and the other side's bound) instead of holding still.
+      An announced mover still behind a stopped obstacle moves sideways in front of a
+      vehicle behind it that is slower than :data:`ZIPPER_MOVING_MPS` and at least
+      :data:`STUCK_GAP_M` back (in a slow, dense file nobody is far enough back to yield,
+      and the mover would wait for ever).
     """
     k2 = j.shape[1]
     u_long = np.empty(n)
@@ -398,6 +406,15 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
         block_left = False  # a stopped obstacle ahead, close on this side
         block_right = False
         block_reach = max(BLOCK_REACH_M, BLOCK_REACH_S * v_i)
+        stuck = False  # a mover still behind a stopped obstacle
+        if mover_i:
+            for k in range(k2):
+                x = ds[i, k]
+                if np.isfinite(x) and x > 0 and static[j[i, k]]:
+                    jj = j[i, k]
+                    if (x - 0.5 * (l_i + length[jj]) < block_reach
+                            and abs(dd[i, k]) - 0.5 * (w_i + width[jj]) < P[FM]):
+                        stuck = True
         for k in range(k2):
             x = ds[i, k]
             ddk = dd[i, k]
@@ -422,6 +439,8 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
             root = math.sqrt(max(P[EBT2] + v_lead * v_lead + P[E2B] * g_pair, 0.0))
             v_ok = 0.0 if g_pair < 0 else P[EMBT] + root
             al = al or ((v_follow > v_ok - P[CIM]) and (v_follow > 0.01))
+            if stuck and not ahead and v_j < ZIPPER_MOVING_MPS and -x - half_l > STUCK_GAP_M:
+                al = False  # a slow vehicle behind lets a stuck mover in front of it
             shift = P[SHC] if j_cav else abs(v_lat[jj]) * dt
             if not j_cav:  # a human driver drifting towards it: where it will be
                 toward = -v_lat[jj] if ddk > 0 else v_lat[jj]
@@ -534,6 +553,27 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
             v_next = 0.0
         u_lat[i] = (v_next - vl_i) / dt
     return u_long, hi_n, lo_n, u_lat, ask, u_yield, n_asked
+
+
+@njit(cache=True)
+def _behind_static(P, i, s, d, v, length, width, static_idx, periodic, period):
+    """Whether CAV ``i`` has a stopped obstacle ahead within :data:`BLOCK_REACH_S` of travel
+    (at least :data:`BLOCK_REACH_M`) that it would still follow: lateral gap below
+    ``follow_margin_m``. Near its target it has not arrived then: a CAV within half its
+    width of a band beside a stopped car, but not yet clear of it, would otherwise drop its
+    announced move and wait, unannounced, for a gap in the traffic passing beside the car
+    (a user's neck, a stopped car: 32 s)."""
+    reach = max(BLOCK_REACH_M, BLOCK_REACH_S * v[i])
+    for q in range(static_idx.shape[0]):
+        kk = static_idx[q]
+        ds_k = s[kk] - s[i]
+        if periodic:
+            ds_k = np.mod(ds_k, period)
+        gap = ds_k - 0.5 * (length[i] + length[kk])
+        lat_gap = abs(d[kk] - d[i]) - 0.5 * (width[i] + width[kk])
+        if ds_k > 0 and gap < reach and lat_gap < P[FM]:
+            return True
+    return False
 
 
 # ------------------------------------------------------------------ one step
@@ -710,6 +750,9 @@ def law_step(P, s, d, v, v_lat, length, width, accel, is_cav, n, order, k_side, 
         target[i] = min(max(target[i], lo[i]), max(lo[i], hi[i]))
         arrived = (abs(target[i] - d[i]) < 0.5 * width[i]) and (d[i] >= lo[i] - 0.05) and (
             d[i] <= hi[i] + 0.05)  # and inside the road ahead
+        if arrived and urgent[i] and static_idx.shape[0] and _behind_static(
+                P, i, s, d, v, length, width, static_idx, periodic, period):
+            arrived = False  # still behind the stopped car: the move stays announced
         if arrived:
             urgent[i] = False
     lead_gap, lead_v = leader_gaps(s, d, length, width, np.arange(n), reach_lead, periodic,
