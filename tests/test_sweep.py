@@ -779,3 +779,32 @@ def test_the_headline_sweep_is_fair_stationary_and_small_enough():
     assert {g for _, g in gaps} == {0.6, 0.8, 1.0}
     modes = {p.scenario.controller.law_params().lateral_mode for p in full.points}
     assert modes == {"free", "fixed"}
+
+
+def test_the_tum_protocol_sweep_is_their_protocol():
+    """`cosim sweep tum_protocol`: TUM LaneFreeDrive's ring runs (TRB 2024): 8 densities x
+    their table's 7 CAV shares x 3 seeds on a 1 km x 10.2 m ring, their ring's five car
+    sizes, random start at rest, step 0.25 s, a detector at 339.09 m counted in 300 s
+    intervals from 2 100 to 3 900 s; seeds first (an interrupted sweep has whole seeds)."""
+    full = sw.load_sweep("tum_protocol")
+    smoke = sw.load_sweep("tum_protocol", smoke=True)
+    assert len(full.points) == 8 * 7 * 3 and len(smoke.points) == 4
+    grid = Counter((p.scenario.demand.ring_density_vpkm, p.scenario.demand.cav_share)
+                   for p in full.points)
+    assert set(grid.values()) == {3}
+    assert {k for k, _ in grid} == {50.0 * i for i in range(1, 9)}
+    assert {s for _, s in grid} == {0.0, 0.1, 0.5, 0.9, 0.95, 0.99, 1.0}
+    assert [p.scenario.scenario.seed for p in full.points[:56]] == [1] * 56
+    for p in full.points:
+        sc = p.scenario
+        assert (sc.network.kind, sc.network.circumference_m, sc.network.width_m) == (
+            "ring", 1000.0, 10.2)
+        assert [c[:2] for c in sc.demand.size_classes] == [
+            (3.2, 1.6), (3.4, 1.7), (3.9, 1.7), (4.55, 1.82), (5.2, 1.88)]
+        assert sc.demand.desired_speed_mps == (25.0, 35.0)
+        assert (sc.demand.ring_placement, sc.demand.ring_initial_speed_mps) == ("random", 0.0)
+        s = sc.scenario
+        assert (s.step_length_s, s.warmup_s, s.duration_s, s.interval_s) == (
+            0.25, 2100.0, 3900.0, 300.0)
+        assert sc.outputs.cross_sections_m == (339.09,)
+    assert all(p.scenario.scenario.duration_s <= 40.0 for p in smoke.points)

@@ -5,7 +5,9 @@
 the grid that actually ran, e.g. a smoke grid, and the tables) and PNG figures in
 ``figures/`` (:mod:`cosim.analysis.figures`). For the headline experiment (variants named
 ``PART/ARM#RUN``, :mod:`cosim.analysis.headline`) also ``headline.md`` (the README's
-tables), ``headline_*.csv`` and the ``figures/headline_*.png``.
+tables), ``headline_*.csv`` and the ``figures/headline_*.png``; for a ring sweep counting at
+TUM LaneFreeDrive's detector (:mod:`cosim.analysis.tum_protocol`) also ``tum_protocol.md``,
+``tum_protocol_*.csv`` and ``figures/tum_protocol_fd.png``.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from cosim.analysis import headline as hl
+from cosim.analysis import tum_protocol as tp
 from cosim.analysis.tables import (
     SweepResults,
     boundary_table,
@@ -28,6 +31,7 @@ from cosim.analysis.tables import (
     fd_runs,
     fd_summary,
     flock_table,
+    is_parameter_column,
     load_results,
     pd_numeric,
     safety_table,
@@ -138,6 +142,8 @@ def analyse(
         files += fig_files
     if hl.is_headline(res):
         files += _headline(res, tables, out, confidence, figures)
+    if tp.is_tum_protocol(res):
+        files += _tum_protocol(res, tables, out, confidence, figures)
     report = out / "report.md"
     report.write_text(_report(res, tables, confidence, fig_files, out))
     files.append(report)
@@ -212,6 +218,32 @@ def _headline(res: SweepResults, tables: dict, out: Path, confidence: float,
     return files + figs + [md]
 
 
+def _tum_protocol(res: SweepResults, tables: dict, out: Path, confidence: float,
+                  figures: bool) -> list[Path]:
+    """TUM's ring protocol: ``tum_protocol_shares.csv``, ``tum_protocol_densities.csv``
+    (into ``tables``), ``tum_protocol.md`` and its figure."""
+    from cosim.analysis import figures as fg
+
+    shares = tp.share_table(res, confidence)
+    dens = tp.density_table(res)
+    tables.update({"tum_protocol_shares": shares, "tum_protocol_densities": dens})
+    files = []
+    for name, df in (("tum_protocol_shares", shares), ("tum_protocol_densities", dens)):
+        p = out / f"{name}.csv"
+        df.to_csv(p, index=False)
+        files.append(p)
+    figs: list[Path] = []
+    name = res.plan.get("name") or res.root.name
+    if figures and len(dens):
+        figs.append(fg.save(fg.tum_protocol_fd_figure(dens, tp.TUM_FIGURE_VPH,
+                                                      tp.TUM_DENSITIES_VPKM, name),
+                            out / "figures" / "tum_protocol_fd.png"))
+    md = out / "tum_protocol.md"
+    md.write_text(_tum_protocol_markdown(shares, dens,
+                                       [p.relative_to(out).as_posix() for p in figs], name))
+    return files + figs + [md]
+
+
 def _report(res: SweepResults, tables, confidence, fig_files, out: Path) -> str:
     plan = res.plan
     n_ok, n_all = len(res.ok), len(res.table)
@@ -242,6 +274,9 @@ def _report(res: SweepResults, tables, confidence, fig_files, out: Path) -> str:
     lines += grid_lines(plan, res.table)
     if "headline_bottleneck" in tables:
         lines += ["The headline tables and figures: [headline.md](headline.md).", ""]
+    if "tum_protocol_shares" in tables:
+        lines += ["TUM's ring protocol, tables and figure: [tum_protocol.md](tum_protocol.md).",
+                  ""]
     for name in ("capacity", "discharge", "fd_summary", "safety", "boundary", "flock",
                  "failed"):
         if name in ("failed", "discharge") and tables[name].empty:
@@ -273,7 +308,7 @@ def grid_lines(plan: dict, table: pd.DataFrame | None = None) -> list[str]:
         if table is None or table.empty:
             return lines + ["(no sweep.json and no results)", ""]
         lines.append("(no sweep.json: parameter values found in results.csv)")
-        for col in [c for c in table.columns if "." in c or c == "seed"]:
+        for col in [c for c in table.columns if is_parameter_column(c) or c == "seed"]:
             vals = table[col].dropna().unique()
             if 0 < len(vals) <= 20:
                 lines.append(f"- {col}: {', '.join(_value(v) for v in sorted(vals, key=str))}")
@@ -300,3 +335,26 @@ def grid_lines(plan: dict, table: pd.DataFrame | None = None) -> list[str]:
         fixed = ", ".join(f"{k} = {_value(v)}" for k, v in plan["overrides"].items())
         lines.append(f"- fixed for every run: {fixed}")
     return lines + [""]
+
+
+def _tum_protocol_markdown(shares: pd.DataFrame, densities: pd.DataFrame, figures: list[str],
+                      name: str) -> str:
+    """``tum_protocol.md``: TUM's table computed on our runs, the flows per density
+    beside TUM's figure, the 5 %-HDV loss both ways, the figures."""
+    lines = [f"# TUM LaneFreeDrive's ring protocol: {name}", "",
+             "Flow: vehicles crossing x = 339.09 m, mean of the 300 s intervals from 2 100 "
+             "to 3 900 s (TUM's E1 detector and window). TUM's table is the mean over the "
+             "densities 50-400 veh/km and 3 seeds; `flow_vph` below is computed the same "
+             "way on our runs.", "",
+             "## Per CAV share (TUM's table)", "", markdown_table(shares)]
+    for col, what in (("flow_vph", "density-averaged flow"), ("max_flow_vph", "peak flow")):
+        ours = tp.hdv_loss(shares, col)
+        tum = tp.hdv_loss(shares, "tum_vph" if col == "flow_vph" else "tum_max_vph")
+        if math.isfinite(ours):
+            lines.append(f"- loss at 5 % human drivers, {what}: ours {100 * ours:.1f} %, "
+                         f"TUM's {100 * tum:.1f} %")
+    lines += ["", "## Per density (TUM's values read off their figure, +-150 veh/h)", "",
+              markdown_table(densities)]
+    if figures:
+        lines += ["## Figures", ""] + [f"![{f}]({f})" for f in figures] + [""]
+    return "\n".join(lines)

@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -227,6 +228,13 @@ def demand_column(table: pd.DataFrame, plan: dict | None = None) -> str | None:
     return None
 
 
+def is_parameter_column(name: str) -> bool:
+    """Whether a results column is a scenario parameter (``section.key``, e.g.
+    ``demand.cav_share``), not a measured value whose name holds a decimal point (a
+    cross-section's flow, ``flow_x339.09_vph``)."""
+    return re.fullmatch(r"[a-z_]+(\.[a-z_][a-z0-9_]*)+", str(name)) is not None
+
+
 def series_columns(
     table: pd.DataFrame, plan: dict | None = None, demand: str | None = None
 ) -> list[str]:
@@ -237,7 +245,7 @@ def series_columns(
     candidates = ["variant"] + list(CORE_SERIES)
     candidates += list(plan.get("axes", {}))
     candidates += [c for v in plan.get("variants", []) for c in v if c != "name"]
-    candidates += [c for c in table.columns if "." in c]  # parameter columns
+    candidates += [c for c in table.columns if is_parameter_column(c)]
     out = []
     for c in dict.fromkeys(candidates):
         if c not in table or c == demand or c in DEMAND_COLUMNS or c == "scenario.seed":

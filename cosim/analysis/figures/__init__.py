@@ -28,7 +28,9 @@ Modules, by job:
   arm with confidence intervals), :func:`headline_mixed_figure` (flow on TUM's ring
   against the CAV share, beside TUM's), :func:`headline_fd_figure` (the ring fundamental
   diagram per time gap and mode) and :func:`headline_gain_figure` (lane-free against
-  fixed rows at equal time gap).
+  fixed rows at equal time gap);
+* :mod:`cosim.analysis.figures.tum_protocol`: :func:`tum_protocol_fd_figure` (TUM's ring
+  protocol: flow at their detector against the density per CAV share, beside theirs).
 
 Points that are not stationary (flow drift of 2 % or more) are drawn hollow everywhere.
 
@@ -88,6 +90,7 @@ from cosim.analysis.figures.sweep import (  # noqa: E402
     fundamental_diagram_figure,
     stationary_mask,
 )
+from cosim.analysis.figures.tum_protocol import tum_protocol_fd_figure  # noqa: E402
 
 __all__ = [
     "ANIMATION_DPI",
@@ -111,6 +114,7 @@ __all__ = [
     "headline_fd_figure",
     "headline_gain_figure",
     "headline_mixed_figure",
+    "tum_protocol_fd_figure",
     "plot_run",
     "road_geometry",
     "save",
