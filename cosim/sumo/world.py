@@ -164,6 +164,7 @@ class SumoWorld:
                  desired: dict | None = None, cav_prefix: str = "cav",
                  gui: bool = False, cav_action_step_s: float | None = None) -> None:
         self.net = net
+        self._teleports = 0  # vehicles SUMO teleported so far (summed over the steps)
         self.dt = float(dt)
         self.cav_action_step_s = max(float(cav_action_step_s or dt), self.dt)
         #: the CAVs act less often than every step (see _act_every_step)
@@ -262,6 +263,8 @@ class SumoWorld:
         """Advance SUMO one step, register departures and arrivals, hold the obstacle."""
         ts = self.ts
         ts.simulationStep()
+        # SUMO reports the teleports that started in this step only: counted here
+        self._teleports += int(ts.simulation.getStartingTeleportNumber())
         self.departed_now = list(ts.simulation.getDepartedIDList())
         self.arrived_now = list(ts.simulation.getArrivedIDList())
         veh = ts.vehicle
@@ -522,8 +525,9 @@ class SumoWorld:
         return [(c.collider, c.victim) for c in self.ts.simulation.getCollisions()]
 
     def teleports(self) -> int:
-        """Vehicles SUMO teleported so far."""
-        return int(self.ts.simulation.getStartingTeleportNumber())
+        """Vehicles SUMO teleported so far (``getStartingTeleportNumber`` counts one step's
+        only: the world sums it every step)."""
+        return self._teleports
 
     def pending(self) -> int:
         """Vehicles due to depart that SUMO could not insert yet."""
