@@ -592,11 +592,12 @@ def linspace01(num):
 #: whose centre is within this of its side (the band it merges into, not the one beyond),
 #: m, and the gap they keep behind it is larger by SUMO's ``minGap`` (2.5 m) plus 0.5 m:
 #: SUMO's driver changes its lateral position only with that gap to its follower there.
-#: s: a human driver alongside that drifts towards a CAV is given the clearance it will
-#: have taken within this time (its lateral speed towards the CAV times it)
-EVADE_S = 1.0
 HELD_REACH_M = 1.0
 HELD_GAP_M = 3.0
+
+#: A human driver alongside that drifts towards a CAV is given the clearance it will have
+#: taken within this time (its lateral speed towards the CAV times it), s.
+EVADE_S = 1.0
 
 #: The repulsion does not push a CAV towards a stopped obstacle ahead within this time of
 #: travel (s), or this distance (m) when slower (bumper to bumper).
