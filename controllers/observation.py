@@ -176,6 +176,13 @@ class Observation:
         desired_speed: (N,) each agent's desired speed along the road, m/s (road only).
         road: the road's edges along its length (:class:`RoadProfile`, road only).
         others_ids: (M,) ids of the sensed vehicles (road only).
+        exits: (K, 4) the road's exits (off-ramps), rows ``(s_start, s_gore, d_right,
+            d_left)``, m: where the lanes that lead onto the exit start and end (the gore,
+            where the exit leaves the road) and their right and left border (road only).
+        exit_index: (N,) int: 0 for an agent that stays on the road, k >= 1 for one that
+            leaves it by ``exits[k - 1]`` (road only).
+        entries: (J, 4) the road's entry strips (an on-ramp's acceleration lane beside the
+            road), rows ``(s_start, s_end, d_right, d_left)``, m (road only).
         extras: law-specific inputs (e.g. seed 003's boundary points).
     """
 
@@ -199,6 +206,9 @@ class Observation:
     desired_speed: np.ndarray | None = None
     road: RoadProfile | None = None
     others_ids: np.ndarray | None = None
+    exits: np.ndarray | None = None
+    exit_index: np.ndarray | None = None
+    entries: np.ndarray | None = None
     extras: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:

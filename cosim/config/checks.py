@@ -120,10 +120,10 @@ def _check_size(sc: Scenario) -> None:
         what = (f"demand.ring_density_vpkm = {demand.ring_density_vpkm:g} veh/km on "
                 f"{net.circumference_m:g} m")
     else:
-        ramp = demand.ramp_inflow_vph if net.kind in ("onramp", "file") else 0.0
-        planned = (demand.inflow_vph + ramp) * run.duration_s / 3600.0
-        what = (f"demand.inflow_vph = {demand.inflow_vph + ramp:g} veh/h for "
-                f"{run.duration_s:g} s")
+        ramp = demand.total_vph("ramp") if net.kind in ("onramp", "file", "corridor") else 0.0
+        total = demand.total_vph("main") + ramp
+        planned = total * run.duration_s / 3600.0
+        what = f"a demand of {total:g} veh/h for {run.duration_s:g} s"
     if planned > MAX_PLANNED_VEHICLES:
         raise ConfigError(f"{what} plans {planned:.3g} vehicles (at most "
                           f"{MAX_PLANNED_VEHICLES:.0e})")

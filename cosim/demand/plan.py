@@ -61,6 +61,7 @@ class _Vehicle:
     lat_m: float | None = None  # lateral centre at departure, m (None: lane centre)
     centre_s_m: float | None = None  # ring: centre position at t = 0, m (None: road start)
     v0_mps: float | None = None  # departure speed, m/s (None: the desired speed)
+    destination: str = "main"  # "main" (the road's end) or "off" (the off-ramp)
 
 
 #: Exponential headways are drawn in chunks of this many (any horizon draws the same
@@ -69,7 +70,8 @@ ARRIVAL_CHUNK = 256
 #: Vehicles per block of the CAV/HDV assignment (see :func:`_kinds`).
 KIND_BLOCK = 20
 #: Independent random streams of an open-road origin (each its own generator).
-_STREAMS = ("arrivals", "kinds", "classes", "speeds", "lateral", "lanes", "ramp_lateral")
+_STREAMS = ("arrivals", "kinds", "classes", "speeds", "lateral", "lanes", "ramp_lateral",
+            "destinations")
 
 
 def arrival_times(
@@ -148,15 +150,31 @@ def _lateral(width_road: float, width_car: np.ndarray, how: str, rng: np.random.
     return rng.uniform(-1.0, 1.0, size=len(width_car)) * room
 
 
+def route_id(origin: str, destination: str) -> str:
+    """The route file's id of an OD pair: the origin's name for the road's end (``main``,
+    ``ramp``), ``<origin>.<destination>`` otherwise (``main.off``)."""
+    return origin if destination == "main" else f"{origin}.{destination}"
+
+
 def _open_stream(
     net: RoadNetwork, demand: DemandSpec, seed: int,
-    origin: str, rate_vph: float, road_width: float, horizon_s: float,
+    origin: str, flows_vph: dict[str, float], road_width: float, horizon_s: float,
 ) -> list[_Vehicle]:
-    """An origin's vehicles: each quantity from its own generator, so a longer horizon
-    only appends vehicles (prefix-stable)."""
+    """An origin's vehicles (arrivals of the total of ``flows_vph``, veh/h per destination,
+    each vehicle's destination drawn in proportion): each quantity from its own generator,
+    so a longer horizon only appends vehicles (prefix-stable)."""
     g = _streams(seed, origin)
+    rate_vph = sum(flows_vph.values())
     times = arrival_times(rate_vph, horizon_s, demand.arrivals, g["arrivals"])
     n = len(times)
+    dests = sorted(flows_vph)
+    if len(dests) > 1 and n:
+        cum = np.cumsum([flows_vph[d] for d in dests]) / rate_vph
+        pick = np.minimum(np.searchsorted(cum, g["destinations"].uniform(size=n), side="right"),
+                          len(dests) - 1)
+        dest = [dests[k] for k in pick]
+    else:
+        dest = [dests[0] if dests else "main"] * n
     is_cav, cls, speed = _draw_common(n, demand, g["kinds"], g)
     widths = np.array([demand.size_classes[c][1] for c in cls])
     lat = _lateral(road_width, widths, demand.depart_lateral, g["lateral"])
@@ -179,7 +197,7 @@ def _open_stream(
             _Vehicle(
                 vid=f"{kind}.{origin}.{i}",
                 vtype=f"{kind}_{cls[i]}",
-                route=origin,
+                route=route_id(origin, dest[i]),
                 depart=round(float(times[i]), 2),
                 speed=float(speed[i]),
                 factor=float(speed[i]) / net.speed_limit_mps,
@@ -192,6 +210,7 @@ def _open_stream(
                 width_m=float(widths[i]),
                 lat_m=None if multi else float(lat[i]),
                 v0_mps=float(v_depart[i]) if slotted else float(speed[i]),
+                destination=dest[i],
             )
         )
     return out
@@ -490,11 +509,19 @@ def plan_vehicles(net: RoadNetwork, demand: DemandSpec, seed: int, horizon_s: fl
     if net.periodic:
         vehicles = _ring_vehicles(net, demand, np.random.default_rng(seed))
         return DemandPlan(vehicles, "ring_initial", ring_route_repeat(net, horizon_s))
-    vehicles = _open_stream(net, demand, seed, "main", demand.inflow_vph,
+    flows = demand.origin_flows()
+    for origin, dest, q in demand.od_vph:  # ConfigError for a pair the road cannot connect
+        od_route = getattr(net, "od_route", None)
+        if q > 0 and od_route is not None:
+            od_route(origin, dest)
+        elif q > 0 and (origin, dest) != ("main", "main"):
+            raise ConfigError(f"demand.od_vph: {origin!r} -> {dest!r} needs a SUMO network "
+                              f"with {'an on-ramp' if origin == 'ramp' else 'an off-ramp'}")
+    vehicles = _open_stream(net, demand, seed, "main", flows.get("main", {}),
                             float(net.width_at(0)), horizon_s)
-    if net.ramp_route and demand.ramp_inflow_vph > 0:
+    if net.ramp_route and sum(flows.get("ramp", {}).values()) > 0:
         ramp_w = net.ramp_width_m or net.width_m
-        vehicles += _open_stream(net, demand, seed, "ramp", demand.ramp_inflow_vph, ramp_w,
+        vehicles += _open_stream(net, demand, seed, "ramp", flows["ramp"], ramp_w,
                                  horizon_s)
     vehicles.sort(key=lambda v: (v.depart, v.vid))
     return DemandPlan(vehicles, demand.arrivals)

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
-from cosim.demand.plan import DemandPlan, _Vehicle, plan_vehicles
+from cosim.demand.plan import DemandPlan, _Vehicle, plan_vehicles, route_id
 from cosim.demand.spec import (
     ACCEL_MPS2,
     CAV_PREFIX,
@@ -41,6 +41,7 @@ from cosim.demand.spec import (
     VTYPE_MAX_SPEED_MPS,
     DemandSpec,
 )
+from cosim.errors import ConfigError
 from cosim.road.frame import RoadNetwork
 
 
@@ -61,6 +62,7 @@ class RouteInfo:
         ring_density_vpkm: realised ring density n / circumference, veh/km (ring only).
         ring_route_repeat: the ``repeat`` count of the ring routes (ring only).
         ring_initial_speed_mps: common speed of the ring vehicles at t=0 (ring only).
+        destination: ``"main"`` or ``"off"`` per vehicle id (open roads).
     """
 
     path: Path
@@ -78,6 +80,7 @@ class RouteInfo:
     ring_density_vpkm: float | None = None
     ring_route_repeat: int | None = None
     ring_initial_speed_mps: float | None = None
+    destination: Mapping[str, str] = field(default_factory=dict, repr=False, compare=False)
 
 
 # Vehicle colours in sumo-gui (8-bit RGB), the same as the figures'
@@ -147,15 +150,23 @@ def vtype_lines(demand: DemandSpec, lanes: bool) -> list[str]:
 
 
 def _route_lines(net: RoadNetwork, repeat: int | None) -> list[str]:
+    """Ring: one looping route per start edge. Open roads: a route per origin and
+    destination (:func:`~cosim.demand.plan.route_id`; :meth:`RoadNetwork.od_route`),
+    those the network cannot connect left out."""
     if net.periodic:
         return [
             f'    <route id="ring.{e}" edges="{" ".join(net.ring_route_edges(e))}" '
             f'repeat="{repeat}"/>'
             for e in net.main_route
         ]
-    lines = [f'    <route id="main" edges="{" ".join(net.main_route)}"/>']
-    if net.ramp_route:
-        lines.append(f'    <route id="ramp" edges="{" ".join(net.ramp_route)}"/>')
+    lines = []
+    for origin in net.origins:
+        for dest in net.destinations:
+            try:
+                edges = net.od_route(origin, dest)
+            except ConfigError:
+                continue
+            lines.append(f'    <route id="{route_id(origin, dest)}" edges="{" ".join(edges)}"/>')
     return lines
 
 
@@ -219,4 +230,5 @@ def _route_info(
         ring_density_vpkm=1000.0 * n_ring / net.length_m if net.periodic else None,
         ring_route_repeat=repeat,
         ring_initial_speed_mps=float(vehicles[0].depart_speed) if n_ring else None,
+        destination={v.vid: v.destination for v in vehicles},
     )

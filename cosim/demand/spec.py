@@ -157,6 +157,11 @@ DEPART_SPEED = ("desired", "max")
 RING_PLACEMENT = ("even", "random")
 
 
+#: Origins and destinations of an OD matrix (``demand.od_vph``).
+OD_ORIGINS = ("main", "ramp")
+OD_DESTINATIONS = ("main", "off")
+
+
 @dataclass(frozen=True)
 class DemandSpec:
     """What traffic to generate (flows in veh/h, density in veh/km, speeds in m/s, time in s).
@@ -191,6 +196,13 @@ class DemandSpec:
             4 000-5 500 veh/h.
         slot_headway_s: minimum time between two departures in one slot, s.
         slot_spacing_m: lateral distance between slot centres, m.
+        od_vph: an origin-destination matrix, ``(origin, destination, flow veh/h)`` rows,
+            for open roads: origins ``"main"`` (the road's start) and ``"ramp"`` (an
+            on-ramp), destinations ``"main"`` (the road's end) and ``"off"`` (an
+            off-ramp); ``cav_share`` applies to every row. Given, it replaces
+            ``inflow_vph`` (the rows from ``"main"``) and ``ramp_inflow_vph`` (from
+            ``"ramp"``): each origin's arrivals are one stream of its rows' total flow,
+            each vehicle drawn a destination in proportion to its origin's rows.
     """
 
     inflow_vph: float = 1800.0
@@ -207,12 +219,14 @@ class DemandSpec:
     insertion: str = "slots"
     slot_headway_s: float = 1.2
     slot_spacing_m: float = 2.55
+    od_vph: tuple[tuple[str, str, float], ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "desired_speed_mps", tuple(self.desired_speed_mps))
         object.__setattr__(
             self, "size_classes", tuple(tuple(float(v) for v in c) for c in self.size_classes)
         )
+        object.__setattr__(self, "od_vph", tuple(tuple(r) for r in self.od_vph))
         self.validate()
 
     def validate(self) -> None:
@@ -236,6 +250,40 @@ class DemandSpec:
             raise ConfigError(f"demand.slot_headway_s must be > 0 (got {self.slot_headway_s})")
         if not (math.isfinite(self.slot_spacing_m) and self.slot_spacing_m > 0):
             raise ConfigError(f"demand.slot_spacing_m must be > 0 (got {self.slot_spacing_m})")
+        self._validate_od()
+
+    def _validate_od(self) -> None:
+        seen = set()
+        for i, row in enumerate(self.od_vph):
+            if len(row) != 3:
+                raise ConfigError(f"demand.od_vph[{i}] must be (origin, destination, veh/h) "
+                                  f"(got {row!r})")
+            o, d, q = row
+            if o not in OD_ORIGINS or d not in OD_DESTINATIONS:
+                raise ConfigError(
+                    f"demand.od_vph[{i}]: origin must be one of {', '.join(OD_ORIGINS)} and "
+                    f"destination one of {', '.join(OD_DESTINATIONS)} (got {o!r} -> {d!r})")
+            _finite_nonneg(f"od_vph[{i}] flow", q)
+            if (o, d) in seen:
+                raise ConfigError(f"demand.od_vph lists {o!r} -> {d!r} twice")
+            seen.add((o, d))
+
+    def total_vph(self, origin: str | None = None) -> float:
+        """Planned flow (veh/h) from ``origin`` (``"main"``, ``"ramp"``), or from every
+        origin (None)."""
+        flows = self.origin_flows()
+        keys = flows if origin is None else [origin]
+        return float(sum(sum(flows.get(k, {}).values()) for k in keys))
+
+    def origin_flows(self) -> dict[str, dict[str, float]]:
+        """Flow (veh/h) per origin and destination: the OD matrix, or without one the main
+        road's ``inflow_vph`` and the ramp's ``ramp_inflow_vph``, all to the road's end."""
+        if not self.od_vph:
+            return {"main": {"main": self.inflow_vph}, "ramp": {"main": self.ramp_inflow_vph}}
+        out: dict[str, dict[str, float]] = {}
+        for o, d, q in self.od_vph:
+            out.setdefault(o, {})[d] = float(q)
+        return out
 
     def _validate_speeds(self) -> None:
         v = self.desired_speed_mps

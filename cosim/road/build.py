@@ -93,6 +93,7 @@ class _Sources:
     edges: list[str]
     main_route: tuple[str, ...]
     ramp_route: tuple[str, ...] | None = None
+    offramp_route: tuple[str, ...] | None = None
     periodic: bool = False
     netconvert_options: tuple[str, ...] = ()
     connections: tuple[str, ...] = ()
@@ -247,6 +248,75 @@ def _sources_onramp_acceleration_lane(spec: NetworkSpec) -> _Sources:
                     ramp_route=("ramp", "acc", "main_down"), connections=connections)
 
 
+def _split(prefix: str, x0: float, x1: float, y: float, max_len: float, first: str,
+           last: str) -> tuple[list[str], list[tuple[str, str, str]]]:
+    """Nodes (between ``first`` and ``last``) and ``(edge, from, to)`` of a straight stretch
+    from ``x0`` to ``x1`` (m) at height ``y``, in equal edges no longer than ``max_len``."""
+    n = _n_edges(x1 - x0, max_len)
+    names = [first, *(f"{prefix}_j{k}" for k in range(1, n)), last]
+    nodes = [_node(names[k], x0 + (x1 - x0) * k / n, y) for k in range(1, n)]
+    edges = [(prefix if n == 1 else f"{prefix}{k}", names[k], names[k + 1]) for k in range(n)]
+    return nodes, edges
+
+
+def _sources_corridor(spec: NetworkSpec) -> _Sources:
+    """The freeway corridor (:attr:`NetworkSpec.kind` ``corridor``).
+
+    Main route: ``main_up*`` (start to the merge), ``acc`` (the on-ramp's acceleration
+    strip: lane 0, ``ramp_width_m`` wide, beside the road's lane(s); it ends with the edge),
+    ``weave*`` (the weaving section), ``dec`` (the off-ramp's deceleration strip: lane 0
+    again, added beside the road where ``dec`` starts), ``main_down*`` (gore to end). The
+    on-ramp ``ramp`` joins ``acc_0``; the off-ramp ``offramp`` leaves ``dec_0`` at the gore.
+    As for the on-ramp network, every main edge spreads its lanes to the right of the road's
+    left edge (``y = width/2``), so the road's centre line stays at ``y = 0``. Long
+    stretches are split into edges of at most ``max_edge_length_m`` (SUMO's sublane model
+    costs more on long lanes, :attr:`NetworkSpec.max_edge_length_m`).
+    """
+    v = spec.speed_limit_mps
+    w, wr, k = spec.width_m, spec.ramp_width_m, spec.lanes
+    lane_w = w / k
+    th = math.radians(spec.ramp_angle_deg)
+    m, acc_end = spec.merge_position_m, spec.merge_position_m + spec.acceleration_lane_m
+    gore = spec.diverge_position_m
+    dec_start = gore - spec.deceleration_lane_m
+    top = 0.5 * w
+    ye = -0.5 * w - 0.5 * wr  # the strips' centre line
+    rx, ry = m - spec.ramp_length_m * math.cos(th), ye - spec.ramp_length_m * math.sin(th)
+    ox, oy = gore + spec.offramp_length_m * math.cos(th), ye - spec.offramp_length_m * math.sin(th)
+    nodes = [
+        _node("start", 0.0, top, "dead_end"), _node("merge", m, top),
+        _node("acc_end", acc_end, top), _node("dec_start", dec_start, top),
+        _node("gore", gore, top), _node("end", spec.length_m, top, "dead_end"),
+        _node("ramp_start", rx, ry, "dead_end"), _node("off_end", ox, oy, "dead_end"),
+    ]
+    mx = spec.max_edge_length_m
+    up_n, up = _split("main_up", 0.0, m, top, mx, "start", "merge")
+    wv_n, wv = _split("weave", acc_end, dec_start, top, mx, "acc_end", "dec_start")
+    dn_n, dn = _split("main_down", gore, spec.length_m, top, mx, "gore", "end")
+    nodes += up_n + wv_n + dn_n
+    main = lambda e: _edge(e[0], e[1], e[2], lane_w, v, lanes=k, spread="right")  # noqa: E731
+    strip_widths = (wr, *([lane_w] * k))
+    edges = [main(e) for e in up]
+    edges.append(_edge("acc", "merge", "acc_end", lane_w, v, lanes=k + 1, spread="right",
+                       lane_widths=strip_widths))
+    edges += [main(e) for e in wv]
+    edges.append(_edge("dec", "dec_start", "gore", lane_w, v, lanes=k + 1, spread="right",
+                       lane_widths=strip_widths))
+    edges += [main(e) for e in dn]
+    edges.append(_edge("ramp", "ramp_start", "merge", wr, v, priority=1,
+                       shape=f"{rx:.3f},{ry:.3f} {m:.3f},{ye:.3f}"))
+    edges.append(_edge("offramp", "gore", "off_end", wr, v, priority=1,
+                       shape=f"{gore:.3f},{ye:.3f} {ox:.3f},{oy:.3f}"))
+    con = '    <connection from="{}" to="{}" fromLane="{}" toLane="{}"/>'.format
+    connections = [con("ramp", "acc", 0, 0), con("dec", "offramp", 0, 0)]
+    for i in range(k):
+        connections += [con(up[-1][0], "acc", i, i + 1), con("acc", wv[0][0], i + 1, i),
+                        con(wv[-1][0], "dec", i, i + 1), con("dec", dn[0][0], i + 1, i)]
+    route = (*(e[0] for e in up), "acc", *(e[0] for e in wv), "dec", *(e[0] for e in dn))
+    return _Sources(nodes, edges, route, ramp_route=("ramp", "acc"),
+                    offramp_route=("offramp",), connections=tuple(connections))
+
+
 def _sources_varying(spec: NetworkSpec) -> _Sources:
     v = spec.speed_limit_mps
     nodes = [_node("w0", 0.0, 0.0, "dead_end")]
@@ -266,6 +336,7 @@ _SOURCE_BUILDERS = {
     "ring": _sources_ring,
     "onramp": _sources_onramp,
     "varying_width": _sources_varying,
+    "corridor": _sources_corridor,
 }
 
 
@@ -299,6 +370,7 @@ def build_network(spec: NetworkSpec, cache_dir: Path | str | None = None) -> Roa
         kind=spec.kind,
         main_route=sources.main_route,
         ramp_route=sources.ramp_route,
+        offramp_route=sources.offramp_route,
         periodic=sources.periodic,
         speed_limit_mps=spec.speed_limit_mps,
     )
@@ -354,6 +426,7 @@ def _load_user_network(spec: NetworkSpec) -> RoadNetwork:
         kind="file",
         main_route=spec.route_edges,
         ramp_route=spec.ramp_edges or None,
+        offramp_route=spec.offramp_edges or None,
         periodic=False,
         speed_limit_mps=None,
     )

@@ -135,13 +135,73 @@ class RoadNetwork:
     #: lanes (junction lanes included) and edges of the main route: a vehicle on one of
     #: them is on the main road; a ramp's lanes and its junction lanes are not
     main_lanes: frozenset = field(default=frozenset(), repr=False, compare=False)
+    #: an off-ramp: its edges (the first leaves a main-route edge), or None
+    offramp_route: tuple[str, ...] | None = None
+    #: the main-route edge the off-ramp leaves, and its lanes that lead onto the off-ramp
+    diverge_edge: str | None = None
+    exit_lanes: tuple[str, ...] = ()
+    #: the exit lanes' extent ``(s_start, s_gore, d_right, d_left)`` (m): ``s`` where they
+    #: start and where they end (the gore: the off-ramp leaves there), their right and
+    #: left border
+    exit_strip: tuple[float, float, float, float] | None = None
+    #: the on-ramp's lanes on the main route (an acceleration strip beside the road) and
+    #: their extent ``(s_start, s_end, d_right, d_left)`` (m); None when the ramp joins
+    #: the road's own lane(s)
+    entry_lanes: tuple[str, ...] = ()
+    entry_strip: tuple[float, float, float, float] | None = None
 
     @property
     def lane_based(self) -> bool:
         """True for the lane-based baseline (``three_lane``: SUMO's LC2013 drivers keep
         lanes). Every other road, a user's multi-lane network included, is lane-free:
         SUMO's sublane model, the lanes only carry the geometry."""
-        return self.kind == "three_lane"
+        return self.kind == "three_lane" or (self.kind == "corridor" and self.n_lanes > 1)
+
+    # ---- origins, destinations and their routes -----------------------------------------
+
+    @property
+    def join_index(self) -> int:
+        """Index in :attr:`ramp_route` of its first main-route edge (where it joins)."""
+        return next(i for i, e in enumerate(self.ramp_route) if e in self.main_route)
+
+    @property
+    def origins(self) -> tuple[str, ...]:
+        """Where traffic enters an open road: ``"main"`` (the main route's start) and, with
+        an on-ramp, ``"ramp"``."""
+        if self.periodic:
+            return ()
+        return ("main", "ramp") if self.ramp_route else ("main",)
+
+    @property
+    def destinations(self) -> tuple[str, ...]:
+        """Where traffic leaves: ``"main"`` (the main route's end) and, with an off-ramp,
+        ``"off"`` (the off-ramp's end)."""
+        if self.periodic:
+            return ()
+        return ("main", "off") if self.offramp_route else ("main",)
+
+    def od_route(self, origin: str, destination: str) -> tuple[str, ...]:
+        """SUMO's edges from ``origin`` to ``destination`` (:attr:`origins`,
+        :attr:`destinations`): the ramp's edges join the main route where the ramp route
+        ends; the off-ramp's leave it at :attr:`diverge_edge`. Raises ConfigError for a
+        pair the network does not connect (an off-ramp before the on-ramp)."""
+        if origin not in self.origins or destination not in self.destinations:
+            raise ConfigError(f"no route from {origin!r} to {destination!r} on this network "
+                              f"(origins {', '.join(self.origins)}; destinations "
+                              f"{', '.join(self.destinations)})")
+        main = self.main_route
+        if origin == "ramp":
+            i = self.join_index
+            edges, first = list(self.ramp_route[:i]), main.index(self.ramp_route[i])
+        else:
+            edges, first = [], 0
+        if destination == "off":
+            leave = main.index(self.diverge_edge)
+            if leave < first:
+                raise ConfigError(f"no route from {origin!r} to 'off': the off-ramp leaves "
+                                  f"the road before the on-ramp joins it")
+            return (*edges, *main[first:leave + 1], *self.offramp_route)
+        return (*edges, *main[first:])
 
     # ---- vehicles: SUMO (lane, position, lateral position) <-> road frame (s, d) --------
 
@@ -329,6 +389,7 @@ def load_road_network(
     ramp_route: Sequence[str] | None = None,
     periodic: bool = False,
     speed_limit_mps: float | None = None,
+    offramp_route: Sequence[str] | None = None,
 ) -> RoadNetwork:
     """Read a ``.net.xml`` with sumolib and compute the road frame of ``main_route``.
 
@@ -339,8 +400,13 @@ def load_road_network(
     path = Path(net_file)
     net = read_sumo_net(path)
     try:
-        return _road_network(path, net, kind, main_route, ramp_route, periodic,
+        road = _road_network(path, net, kind, main_route, ramp_route, periodic,
                              speed_limit_mps)
+        if offramp_route:
+            road = _with_offramp(road, net, tuple(offramp_route))
+        if ramp_route and road.join_index > 0:
+            road = _with_entry_strip(road, net)
+        return road
     except (TypeError, ValueError, IndexError, KeyError, ZeroDivisionError) as exc:
         # geometry sumolib or the frame cannot handle (missing shapes, positions...)
         msg = str(exc).splitlines()[0] if str(exc) else ""
@@ -435,3 +501,53 @@ def _road_network(path: Path, net: Any, kind: str, main_route: Sequence[str],
         tables=tb,
         main_lanes=frozenset([g.lane_id for g in lanes if g.main] + list(main_route)),
     )
+
+
+def _strip(road: RoadNetwork, lanes: list[str]) -> tuple[float, float, float, float]:
+    """``(s_start, s_end, d_right, d_left)`` (m) of route lanes ``lanes`` side by side."""
+    tb = road.tables
+    keys = np.array([tb.index[x] for x in lanes])
+    s_end, _ = frame_of(tb, keys, tb.lane_len[keys], np.zeros(len(keys)))
+    right = min(road.lane_d[x] - 0.5 * road.lane_width[x] for x in lanes)
+    left = max(road.lane_d[x] + 0.5 * road.lane_width[x] for x in lanes)
+    return (float(min(road.lane_offsets[x] for x in lanes)), float(s_end.max()),
+            float(right), float(left))
+
+
+def _with_entry_strip(road: RoadNetwork, net: Any) -> RoadNetwork:
+    """``road`` with its acceleration strip: the lanes of the main-route edge the on-ramp
+    joins that are reached from the ramp, when they are not all of that edge's lanes."""
+    from dataclasses import replace
+
+    i = road.join_index
+    edge = net.getEdge(road.ramp_route[i])
+    reached = sorted({c.getToLane().getID() for c in connections(
+        net.getEdge(road.ramp_route[i - 1]), edge.getID())})
+    if not reached or len(reached) == len(lanes_of(edge)):
+        return road
+    return replace(road, entry_lanes=tuple(reached), entry_strip=_strip(road, reached))
+
+
+def _with_offramp(road: RoadNetwork, net: Any, offramp: tuple[str, ...]) -> RoadNetwork:
+    """``road`` with its off-ramp: the main-route edge it leaves (the last one with lanes
+    connected to the off-ramp's first edge), those lanes and their extent in the frame."""
+    from dataclasses import replace
+
+    for eid in offramp:
+        if not net.hasEdge(eid):
+            raise NetworkError(f"edge {eid!r} of the off-ramp route is not in network "
+                               f"{road.net_file.name}")
+    if offramp[0] in road.main_route:
+        raise NetworkError(f"the off-ramp route's first edge {offramp[0]!r} is on the main "
+                           f"route: it must leave it")
+    diverge = [e for e in road.main_route if connections(net.getEdge(e), offramp[0])]
+    if not diverge:
+        raise NetworkError(f"no main-route edge leads onto the off-ramp's first edge "
+                           f"{offramp[0]!r}")
+    edge = diverge[-1]
+    lanes = sorted({c.getFromLane().getID() for c in connections(net.getEdge(edge), offramp[0])})
+    for a, b in zip(offramp, offramp[1:], strict=False):
+        if not connections(net.getEdge(a), b):
+            raise NetworkError(f"off-ramp edge {a!r} is not connected to the next edge {b!r}")
+    return replace(road, offramp_route=offramp, diverge_edge=edge, exit_lanes=tuple(lanes),
+                   exit_strip=_strip(road, lanes))

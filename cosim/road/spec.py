@@ -13,7 +13,7 @@ from typing import Any
 
 from cosim.errors import ConfigError
 
-KINDS = ("straight", "ring", "onramp", "varying_width", "three_lane", "file")
+KINDS = ("straight", "ring", "onramp", "varying_width", "three_lane", "corridor", "file")
 
 
 #: Fewest edges of the ring; each is a circular arc drawn with RING_ARC_POINTS segments.
@@ -31,13 +31,28 @@ CONVENTIONAL_LANE_WIDTH_M = 3.4
 MIN_EDGE_AFTER_LANE_M = 20.0
 
 
+#: Freeway corridor (kind ``corridor``) after TUM LaneFreeDrive's highway with an off- and an
+#: on-ramp (adapted from TrafficFluid-Sim): 3 m ramp strips, the on-ramp's 482 m long and
+#: the off-ramp's 342 m long (m).
+CORRIDOR_STRIP_WIDTH_M = 3.0
+CORRIDOR_ACCELERATION_LANE_M = 482.0
+CORRIDOR_DECELERATION_LANE_M = 342.0
+
+
 @dataclass(frozen=True)
 class NetworkSpec:
     """Parameters of a road network (lengths and widths in m, speeds in m/s).
 
     Attributes:
         kind: one of ``straight``, ``ring``, ``onramp``, ``varying_width``,
-            ``three_lane``, ``file``.
+            ``three_lane``, ``corridor``, ``file``. ``corridor``: a freeway stretch of
+            ``length_m`` with an on-ramp (its acceleration strip of ``acceleration_lane_m``
+            starts at ``merge_position_m``) and, downstream of it, an off-ramp (its
+            deceleration strip of ``deceleration_lane_m`` ends at the gore,
+            ``diverge_position_m``, where the off-ramp of ``offramp_length_m`` leaves);
+            the stretch between them is a weaving section. Ramps and strips are
+            ``ramp_width_m`` wide; ``lanes`` = 3 gives the same corridor with three
+            conventional lanes (SUMO's LC2013 drivers, the lane-based baseline).
         length_m: road length (straight, three_lane) or main-road length (onramp).
         width_m: width of the single wide lane (three_lane: total width of 3 lanes).
         circumference_m: ring circumference along the road centre line.
@@ -72,6 +87,14 @@ class NetworkSpec:
         route_edges: kind ``file``: edge ids of the main route in driving order.
         ramp_edges: kind ``file`` (optional): edge ids of a ramp route that ends
             on a main-route edge.
+        diverge_position_m: corridor: distance from the main road's start to the gore
+            (where the off-ramp leaves the deceleration strip), m.
+        deceleration_lane_m: corridor: length of the deceleration strip before the gore, m.
+        offramp_length_m: corridor: length of the off-ramp after the gore, m.
+        lanes: corridor: 1 (one wide lane, lane-free) or 3 (three conventional lanes of
+            ``width_m / 3``).
+        offramp_edges: kind ``file`` (optional): edge ids of an off-ramp route; its first
+            edge leaves a main-route edge (from the lanes of that edge that connect to it).
     """
 
     kind: str = "straight"
@@ -89,6 +112,11 @@ class NetworkSpec:
     net_file: str | None = None
     route_edges: tuple[str, ...] = ()
     ramp_edges: tuple[str, ...] = ()
+    diverge_position_m: float = 2500.0
+    deceleration_lane_m: float = CORRIDOR_DECELERATION_LANE_M
+    offramp_length_m: float = 300.0
+    lanes: int = 1
+    offramp_edges: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         # Accept lists from TOML/JSON but store hashable tuples.
@@ -96,6 +124,7 @@ class NetworkSpec:
         object.__setattr__(self, "width_profile", profile)
         object.__setattr__(self, "route_edges", tuple(str(e) for e in self.route_edges))
         object.__setattr__(self, "ramp_edges", tuple(str(e) for e in self.ramp_edges))
+        object.__setattr__(self, "offramp_edges", tuple(str(e) for e in self.offramp_edges))
         self.validate()
 
     def validate(self) -> None:
@@ -114,6 +143,7 @@ class NetworkSpec:
             "ring": self._validate_ring,
             "onramp": self._validate_onramp,
             "varying_width": self._validate_varying,
+            "corridor": self._validate_corridor,
             "file": self._validate_file,
         }[self.kind]
         check()
@@ -164,6 +194,34 @@ class NetworkSpec:
                 f"+ acceleration_lane_m <= {self.length_m - MIN_EDGE_AFTER_LANE_M:g} m)"
             )
 
+    def _validate_corridor(self) -> None:
+        self._validate_straight()
+        for name in ("ramp_length_m", "deceleration_lane_m", "offramp_length_m",
+                     "acceleration_lane_m", "diverge_position_m", "merge_position_m"):
+            _positive(name, getattr(self, name))
+        _positive("ramp_width_m", self.ramp_width_m)
+        if not 0.0 < self.ramp_angle_deg < 90.0:
+            raise ConfigError(
+                f"network.ramp_angle_deg must be in (0, 90) (got {self.ramp_angle_deg})"
+            )
+        if self.lanes not in (1, 3):
+            raise ConfigError(f"network.lanes must be 1 or 3 for corridor (got {self.lanes})")
+        acc_end = self.merge_position_m + self.acceleration_lane_m
+        dec_start = self.diverge_position_m - self.deceleration_lane_m
+        if acc_end + MIN_EDGE_AFTER_LANE_M > dec_start:
+            raise ConfigError(
+                f"network: the corridor's strips overlap: the acceleration strip ends at "
+                f"{acc_end:g} m (merge_position_m + acceleration_lane_m) and the "
+                f"deceleration strip starts at {dec_start:g} m (diverge_position_m - "
+                f"deceleration_lane_m); leave at least {MIN_EDGE_AFTER_LANE_M:g} m between"
+            )
+        if self.diverge_position_m + MIN_EDGE_AFTER_LANE_M > self.length_m:
+            raise ConfigError(
+                f"network.diverge_position_m = {self.diverge_position_m:g} m must be at least "
+                f"{MIN_EDGE_AFTER_LANE_M:g} m before the road's end (length_m = "
+                f"{self.length_m:g})"
+            )
+
     def _validate_varying(self) -> None:
         if not self.width_profile:
             raise ConfigError("network.width_profile must list (length_m, width_m) segments")
@@ -203,7 +261,12 @@ class NetworkSpec:
                 "ramp_angle_deg", "merge_position_m", "acceleration_lane_m",
             ),
             "varying_width": ("width_profile",),
-            "file": ("net_file", "route_edges", "ramp_edges"),
+            "corridor": (
+                "length_m", "width_m", "ramp_length_m", "ramp_width_m", "ramp_angle_deg",
+                "merge_position_m", "acceleration_lane_m", "diverge_position_m",
+                "deceleration_lane_m", "offramp_length_m", "lanes", "max_edge_length_m",
+            ),
+            "file": ("net_file", "route_edges", "ramp_edges", "offramp_edges"),
         }[self.kind]
         params = {k: getattr(self, k) for k in keys}
         params.update(kind=self.kind, speed_limit_mps=self.speed_limit_mps)

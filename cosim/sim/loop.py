@@ -147,6 +147,7 @@ class Loop:
         self.dt = float(world.dt)
         self.k = 0
         self.last = StepData()
+        self._exit_profiles: list | None = None  # see _exit_roads
 
     # ------------------------------------------------------------------------------
     def run(self, n_steps: int, progress: Callable[[int], Any] | None = None) -> None:
@@ -214,6 +215,8 @@ class Loop:
                                                       state.length, state.width, state.desired),
             float(self.world.speed_limit_mps), self.dt, 2 * b, EDGE_MARGIN_AHEAD_M)
         edges = self.world.road.narrowest(q[:, 0], stop)
+        for k, road in self._exit_roads(state, rows):  # leaving CAVs: the strip goes on
+            edges[k] = road.narrowest(q[k, 0], stop[k])
         all_ids = state.ids
         # the observation's arrays are built here in their final form (float64, the
         # documented shapes): the constructor's checks and conversions are skipped
@@ -231,8 +234,37 @@ class Loop:
             q=q, p=p, t=st.t, dt=self.dt, ids=_objects(st.cav_ids), length=length,
             width=width, others_q=oq, others_p=op, others_length=ol, others_width=ow,
             others_ids=oids, road_edges=edges, period_s=self.world.period,
-            desired_speed=desired, road=self.world.road,
+            desired_speed=desired, road=self.world.road, **self._exits(state, rows),
         )
+
+    def _exit_roads(self, state: RoadSnapshot, rows: np.ndarray) -> list:
+        """``(CAV indices, road)`` for the CAVs leaving by an exit: the road with the exit's
+        strip going on past the gore (:func:`controllers.road.exits.exit_road`), for the
+        edges that bound them and the safety layer's walls; empty without exits."""
+        exits = getattr(self.world, "exits", None)
+        if exits is None or state.purpose is None:
+            return []
+        idx = state.purpose[rows]
+        if not idx.any():
+            return []
+        if self._exit_profiles is None:
+            from controllers.road.exits import exit_road
+
+            self._exit_profiles = [exit_road(self.world.road, row) for row in exits]
+        return [(np.flatnonzero(idx == k + 1), road)
+                for k, road in enumerate(self._exit_profiles) if (idx == k + 1).any()]
+
+    def _exits(self, state: RoadSnapshot, rows: np.ndarray) -> dict:
+        """The road's exits and each CAV's, and its entry strips (observation fields; none
+        without them)."""
+        out = {}
+        entries = getattr(self.world, "entries", None)
+        if entries is not None:
+            out["entries"] = entries
+        exits = getattr(self.world, "exits", None)
+        if exits is not None and state.purpose is not None:
+            out.update(exits=exits, exit_index=state.purpose[rows])
+        return out
 
     def _control(self, st: StepData) -> None:
         u = self.law.compute(st.obs)
@@ -268,19 +300,26 @@ class Loop:
                              state.length[on_road], state.width[on_road],
                              state.v_lat[on_road])
         st.u, st.v_lat_next = self.safety.apply(st.u, pos, obs.p[:, 1], road, obs.road_edges,
-                                                self.world.period, self._wall_gap(obs))
+                                                self.world.period, self._wall_gap(obs, st))
 
-    def _wall_gap(self, obs: Observation) -> np.ndarray | None:
+    def _wall_gap(self, obs: Observation, st: StepData | None = None) -> np.ndarray | None:
         """Distance (N,) m from each CAV's front to the first road piece within
-        ``WALL_REACH_M`` whose edges its body does not fit into at its lateral position."""
+        ``WALL_REACH_M`` whose edges its body does not fit into at its lateral position
+        (a CAV leaving by an exit: on its road, :meth:`_exit_roads`)."""
         road = self.world.road
         if road.is_constant:
             return None
-        return first_wall_ahead(
-            np.ascontiguousarray(obs.q[:, 0]), np.ascontiguousarray(obs.q[:, 1]),
-            np.ascontiguousarray(obs.width, dtype=float),
-            np.ascontiguousarray(obs.length, dtype=float), road.s0, road.right, road.left,
-            bool(road.periodic), float(road.length_m), WALL_REACH_M)
+        args = (np.ascontiguousarray(obs.q[:, 0]), np.ascontiguousarray(obs.q[:, 1]),
+                np.ascontiguousarray(obs.width, dtype=float),
+                np.ascontiguousarray(obs.length, dtype=float))
+        out = first_wall_ahead(*args, road.s0, road.right, road.left, bool(road.periodic),
+                               float(road.length_m), WALL_REACH_M)
+        if st is not None:
+            for k, ex in self._exit_roads(st.state, st.cav_rows):
+                out[k] = first_wall_ahead(*(np.ascontiguousarray(a[k]) for a in args), ex.s0,
+                                          ex.right, ex.left, bool(ex.periodic),
+                                          float(ex.length_m), WALL_REACH_M)
+        return out
 
     def _integrate(self, st: StepData) -> None:
         obs = st.obs

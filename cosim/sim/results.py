@@ -3,6 +3,7 @@
 Files (``RunResult.write``): ``summary.csv`` (one row), ``intervals.csv`` (one row per
 measurement interval), ``flock.csv`` (CAV flock metrics every second),
 ``collisions.csv`` (every collision event), ``trajectories.csv`` (optional),
+``trips.csv`` (open roads in SUMO: every vehicle's origin, destination and times),
 ``config.toml`` (the resolved scenario: every parameter, the law's gains included),
 ``meta.json`` (seed, versions, world, demand and measurement layout, wall time), and
 the SUMO world's inputs and detector outputs: ``routes.rou.xml``, ``detectors.add.xml``
@@ -49,6 +50,9 @@ class RunResult:
     out_dir: Path | None = None
     #: the world's input and detector files, by path relative to the run folder
     inputs: dict[str, bytes] = field(default_factory=dict)
+    #: one row per planned vehicle of an open road (origin, destination, times; see
+    #: :func:`cosim.sim.runner.trip_table`), or None
+    trips: pd.DataFrame | None = None
 
     def write(self, out_dir: str | Path) -> Path:
         """Write every table as CSV plus meta.json and config.toml into ``out_dir``."""
@@ -60,6 +64,8 @@ class RunResult:
         self.collisions.to_csv(out / "collisions.csv", index=False)
         if self.trajectories is not None:
             self.trajectories.to_csv(out / "trajectories.csv", index=False)
+        if self.trips is not None:
+            self.trips.to_csv(out / "trips.csv", index=False)
         for rel, data in self.inputs.items():
             target = out / rel
             target.parent.mkdir(parents=True, exist_ok=True)

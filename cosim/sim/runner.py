@@ -76,7 +76,7 @@ def capacity_layout(sc: Scenario, road, net) -> cap.Layout:
     profile (``road``: a RoadProfile) or an on-ramp merge with ramp demand."""
     ob = sc.obstacle
     obstacle = (ob.s_m, ob.length_m) if ob.present else None
-    merge = getattr(net, "merge_s_m", None) if sc.demand.ramp_inflow_vph > 0 else None
+    merge = getattr(net, "merge_s_m", None) if sc.demand.total_vph("ramp") > 0 else None
     widths = np.asarray(road.left, dtype=float) - np.asarray(road.right, dtype=float)
     bottleneck = cap.find_bottleneck(road.s0, widths, obstacle, merge)
     return cap.layout_for(float(net.length_m), bool(net.periodic), bottleneck)
@@ -178,7 +178,8 @@ def build_world(sc: Scenario, work: Path, gui: bool = False):
     # less often SUMO's drivers behave differently (scenario.cav_action_step_s)
     action_step = run.cav_action_step_s if routes.n_hdv == 0 else run.step_length_s
     world = SumoWorld(net, args, dt=run.step_length_s, desired=routes.desired_speed_mps,
-                      gui=gui, cav_action_step_s=action_step)
+                      gui=gui, cav_action_step_s=action_step,
+                      destinations=routes.destination if net.offramp_route else None)
     world.lateral_resolution_m = resolution  # SUMO's sublane width, m (None: lanes)
     return world, net, plan, detectors
 
@@ -205,8 +206,8 @@ def _run_in(sc: Scenario, work: Path, gui: bool, progress, hooks) -> RunResult:
     jams = JamRecorder(run.step_length_s, run.warmup_s, xs, period,
                        sc.outputs.standstill_speed_mps, sc.outputs.long_standstill_s)
     layout = capacity_layout(sc, world.road, net)
-    ramp = sc.demand.ramp_inflow_vph if getattr(net, "ramp_route", None) else 0.0
-    demand = 0.0 if net.periodic else sc.demand.inflow_vph + ramp
+    ramp = sc.demand.total_vph("ramp") if getattr(net, "ramp_route", None) else 0.0
+    demand = 0.0 if net.periodic else sc.demand.total_vph("main") + ramp
     caprec = CapacityRecorder(run.step_length_s, layout, run.warmup_s, run.duration_s,
                               demand_vph=demand)
     every = sc.outputs.trajectory_every if sc.outputs.trajectories else 0
@@ -264,6 +265,10 @@ def _run_in(sc: Scenario, work: Path, gui: bool, progress, hooks) -> RunResult:
         summary[f"clip_rate_{name}"] = rate
     for layer in loop.layers:
         summary[f"clip_rate_loop_{layer.name}"] = layer.clip_rate
+    trips = (trip_table(world, plan) if getattr(net, "offramp_route", None) or sc.demand.od_vph
+             else None)
+    if trips is not None:
+        summary.update(trip_summary(trips, world))
     flock = rec.flock_table()
     if len(flock):
         for col in ("min_agent_distance_m", "velocity_alignment", "largest_component_share"):
@@ -309,7 +314,56 @@ def _run_in(sc: Scenario, work: Path, gui: bool, progress, hooks) -> RunResult:
                                 columns=["t_s", "source", "a", "b", "kind"]),
         trajectories=rec.trajectory_table(),
         meta=meta,
+        trips=trips,
     )
+
+
+def trip_table(world, plan):
+    """One row per planned vehicle of an open road in the SUMO world (None elsewhere):
+    ``vehicle``, ``kind`` (cav/hdv), ``origin``, ``destination`` (planned), ``reached``
+    ("main": the road's end, "off": the off-ramp, "": still on the road or never left the
+    entrance), and the times (s) it departed, joined the main road from the on-ramp
+    (``merge_s``), left it by the off-ramp (``exit_s``) and arrived, and ``travel_time_s``
+    (arrival - departure)."""
+    import pandas as pd
+
+    trips = getattr(world, "trips", None)
+    if trips is None or not plan.vehicles or plan.vehicles[0].centre_s_m is not None:
+        return None
+    rows = []
+    for v in plan.vehicles:
+        dep, merge, exit_t, arr = trips.get(v.vid, [np.nan] * 4)
+        reached = "" if np.isnan(arr) else ("off" if np.isfinite(exit_t) else "main")
+        rows.append((v.vid, "cav" if v.is_cav else "hdv", v.vid.split(".")[1], v.destination,
+                     reached, dep, merge, exit_t, arr, arr - dep))
+    return pd.DataFrame(rows, columns=["vehicle", "kind", "origin", "destination", "reached",
+                                       "depart_s", "merge_s", "exit_s", "arrive_s",
+                                       "travel_time_s"])
+
+
+def trip_summary(trips, world) -> dict:
+    """Summary columns of the trip table: missed and wrong exits by kind (a missed exit:
+    planned for the off-ramp, arrived at the road's end; for CAVs the SUMO world's
+    backstop re-routes a CAV still on the wrong lane at the gore and counts it), and the
+    mean travel time (s) per origin -> destination of the trips that arrived where they
+    were going (``travel_time_<origin>_<destination>_s``; NaN: none arrived)."""
+    out: dict = {}
+    done = trips[trips.reached != ""]
+    for kind in ("cav", "hdv"):
+        k = done[done.kind == kind]
+        out[f"missed_exits_{kind}"] = int(((k.destination == "off") & (k.reached == "main")).sum())
+        out[f"wrong_exits_{kind}"] = int(((k.destination == "main") & (k.reached == "off")).sum())
+    for o in ("main", "ramp"):
+        for d in ("main", "off"):
+            sel = done[(done.origin == o) & (done.destination == d) & (done.reached == d)]
+            if (trips.origin == o).any() and (trips.destination == d).any():
+                out[f"travel_time_{o}_{d}_s"] = (float(sel.travel_time_s.mean()) if len(sel)
+                                                 else np.nan)
+                out[f"trips_{o}_{d}"] = int(len(sel))
+    missed, wrong = getattr(world, "missed_exits", {}), getattr(world, "wrong_exits", {})
+    for kind in ("cav", "hdv"):
+        out[f"exit_backstop_{kind}"] = int(missed.get(kind, 0) + wrong.get(kind, 0))
+    return out
 
 
 def _is_sumo_error(exc: BaseException) -> bool:

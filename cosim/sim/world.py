@@ -38,6 +38,8 @@ class RoadSnapshot:
         on_main: (M,) bool: on the main route (a ramp vehicle is not, until it merges).
         is_static: (M,) bool: a stopped obstacle (not traffic).
         desired: (M,) desired speed, m/s (NaN: unknown).
+        purpose: (M,) int: 0 for a vehicle that stays on the main route, 1 for one that
+            leaves it by the off-ramp (None: nobody leaves).
     """
 
     ids: list
@@ -52,6 +54,7 @@ class RoadSnapshot:
     on_main: np.ndarray
     is_static: np.ndarray
     desired: np.ndarray
+    purpose: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -67,6 +70,7 @@ class RoadSnapshot:
             d=self.d[rows], v=self.v[rows], v_lat=self.v_lat[rows], length=self.length[rows],
             width=self.width[rows], is_cav=self.is_cav[rows], on_main=self.on_main[rows],
             is_static=self.is_static[rows], desired=self.desired[rows],
+            purpose=None if self.purpose is None else self.purpose[rows],
         )
 
     @classmethod

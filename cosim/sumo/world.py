@@ -162,8 +162,24 @@ class SumoWorld:
 
     def __init__(self, net: RoadNetwork, sumo_args: list[str], dt: float = 0.1,
                  desired: dict | None = None, cav_prefix: str = "cav",
-                 gui: bool = False, cav_action_step_s: float | None = None) -> None:
+                 gui: bool = False, cav_action_step_s: float | None = None,
+                 destinations: dict | None = None) -> None:
         self.net = net
+        #: destination per vehicle id ("main" or "off"), and the trip log: id -> [depart,
+        #: joined the main road (ramp traffic), left it by the off-ramp, arrived] times, s
+        self.destination = dict(destinations or {})
+        self.trips: dict[str, list[float]] = {}
+        #: the road's exit (an off-ramp): (1, 4) rows (s_start, s_gore, d_right, d_left), m
+        self.exits = (np.array([net.exit_strip], dtype=float) if net.exit_strip is not None
+                      else None)
+        #: the on-ramp's acceleration strip: (1, 4) rows (s_start, s_end, d_right, d_left), m
+        self.entries = (np.array([net.entry_strip], dtype=float)
+                        if net.entry_strip is not None else None)
+        #: vehicles that would have missed their exit (sent on to the road's end) or taken
+        #: an exit not theirs (sent down the off-ramp), by kind "cav" / "hdv"
+        self.missed_exits = {"cav": 0, "hdv": 0}
+        self.wrong_exits = {"cav": 0, "hdv": 0}
+        self._exit_lanes = frozenset(net.exit_lanes)
         self._teleports = 0  # vehicles SUMO teleported so far (summed over the steps)
         self.dt = float(dt)
         self.cav_action_step_s = max(float(cav_action_step_s or dt), self.dt)
@@ -268,7 +284,9 @@ class SumoWorld:
         self.departed_now = list(ts.simulation.getDepartedIDList())
         self.arrived_now = list(ts.simulation.getArrivedIDList())
         veh = ts.vehicle
+        t = float(ts.simulation.getTime())
         for vid in self.departed_now:
+            self.trips[vid] = [t, np.nan, np.nan, np.nan]
             veh.subscribe(vid, _vars())
             if ".ramp." in vid:  # keeps its lateral place on the ramp (see _release_ramp)
                 veh.setLaneChangeMode(vid, 0)
@@ -277,9 +295,11 @@ class SumoWorld:
             self.types[vid] = tid
             self._static[vid] = (
                 veh.getLength(vid), veh.getWidth(vid), tid.startswith(self.cav_prefix),
-                self.desired.get(vid, np.nan),
+                self.desired.get(vid, np.nan), float(self.destination.get(vid) == "off"),
             )
         for vid in self.arrived_now:
+            if vid in self.trips:
+                self.trips[vid][3] = t
             self.types.pop(vid, None)
             self._static.pop(vid, None)
             self.controlled.discard(vid)
@@ -307,11 +327,11 @@ class SumoWorld:
         v_lat_now = np.fromiter(map(self.v_lat_state.get, ids, slat), dtype=float, count=n)
         if ids != self._static_ids:
             static = self._static
-            cols = np.array([static[vid] for vid in ids], dtype=float).reshape(n, 4)
+            cols = np.array([static[vid] for vid in ids], dtype=float).reshape(n, 5)
             self._static_cols = (cols[:, 0].copy(), cols[:, 1].copy(), cols[:, 2] > 0,
-                                 cols[:, 3].copy())
+                                 cols[:, 3].copy(), cols[:, 4].astype(np.int64))
             self._static_ids = ids
-        length, width, is_cav, desired = self._static_cols
+        length, width, is_cav, desired, purpose = self._static_cols
         codes = np.fromiter(map(self._lane_code.__getitem__, lane), dtype=np.int64, count=n)
         keys = self._code_key[codes]
         self._ids, self._row_cache = ids, None
@@ -331,13 +351,78 @@ class SumoWorld:
         if self.period is not None:
             s = np.mod(s, self.period)
         on_main = self._code_main[codes] & ~np.isnan(s)
+        if self.exits is not None:
+            if self._exit_check(ids, lane, pos, speed, on_main, is_cav, purpose):
+                self._static_ids = None  # a purpose changed: rebuild the columns
+                return self.observe()
         is_static = np.zeros(n, dtype=bool)
         if self.obstacle_id is not None:
             row = self._row_of().get(self.obstacle_id)
             if row is not None:
                 is_static[row] = True
         return RoadSnapshot(ids, s, s_front, d_front, speed, v_lat_now, length.copy(),
-                            width.copy(), is_cav.copy(), on_main, is_static, desired.copy())
+                            width.copy(), is_cav.copy(), on_main, is_static, desired.copy(),
+                            None if self.exits is None else purpose.copy())
+
+    #: A vehicle on the lane before the gore that is not one leading onto its route's next
+    #: edge is re-routed when its front is within this time of travel of the lane's end, s
+    #: (plus EXIT_BACKSTOP_MIN_M): SUMO would stop it there.
+    EXIT_BACKSTOP_S = 1.0
+    EXIT_BACKSTOP_MIN_M = 2.0
+
+    def _exit_check(self, ids, lanes, pos, speed, on_main, is_cav, purpose) -> bool:
+        """Exits, for a road with an off-ramp: log each vehicle's time of leaving the main
+        road by the off-ramp; hand a CAV that left back to SUMO (its speed and lane-change
+        checks on again); the backstop: a vehicle still on the wrong lane just before the
+        gore gets a new destination (counted: a missed exit, or a wrong one). For a CAV it
+        catches a failure of the law. A human driver that has not reached the exit's lane
+        by then drives on, as a driver who misses an exit does: SUMO's would stop at the
+        lane's end and, standing, never move sideways (SL2015's lcMaxSpeedLatStanding is 0),
+        blocking the road for good. Returns True when a destination changed."""
+        veh = self.ts.vehicle
+        t = float(self.ts.simulation.getTime())
+        trips, controlled = self.trips, self.controlled
+        for i in np.flatnonzero(~on_main).tolist():
+            vid = ids[i]
+            if vid in self._on_ramp or vid == self.obstacle_id:
+                continue
+            trip = trips.get(vid)
+            if trip is not None and np.isnan(trip[2]):
+                trip[2] = t
+            if vid in controlled:  # left the road: SUMO drives it on the off-ramp
+                controlled.discard(vid)
+                self.v_lat_state.pop(vid, None)
+                veh.setSpeedMode(vid, 31)
+                veh.setLaneChangeMode(vid, SUMO_DEFAULT_LANE_CHANGE_MODE)
+                veh.setSpeed(vid, -1.0)
+                veh.setActionStepLength(vid, self.dt, True)
+                self._every_step.discard(vid)
+                self._clearing.discard(vid)
+        diverge = self.net.diverge_edge
+        changed = False
+        tb = self.net.tables
+        for i, lane in enumerate(lanes):
+            if not lane.startswith(diverge + "_") or ids[i] == self.obstacle_id:
+                continue
+            left = float(tb.lane_len[tb.index[lane]]) - float(pos[i])
+            if left > self.EXIT_BACKSTOP_MIN_M + self.EXIT_BACKSTOP_S * float(speed[i]):
+                continue
+            on_exit_lane = lane in self._exit_lanes
+            main = self.net.main_route
+            if purpose[i] == 1 and not on_exit_lane:
+                veh.setRoute(ids[i], main[main.index(diverge):])
+                self.destination[ids[i]] = "main"
+                self.missed_exits["cav" if is_cav[i] else "hdv"] += 1
+            elif purpose[i] == 0 and on_exit_lane:
+                veh.setRoute(ids[i], (diverge, *self.net.offramp_route))
+                self.destination[ids[i]] = "off"
+                self.wrong_exits["cav" if is_cav[i] else "hdv"] += 1
+            else:
+                continue
+            st = self._static[ids[i]]
+            self._static[ids[i]] = (*st[:4], float(self.destination[ids[i]] == "off"))
+            changed = True
+        return changed
 
     def _row_of(self) -> dict[str, int]:
         """Id -> row in the last observation (built once per observation, when asked)."""
@@ -349,9 +434,12 @@ class SumoWorld:
         """Give vehicles that reached the main road back their lane-change model."""
         veh = self.ts.vehicle
         row_of, lanes = self._row_of(), self._lanes
+        t = float(self.ts.simulation.getTime())
         for vid in [v for v in self._on_ramp if v not in row_of
                     or lanes[row_of[v]] in self.main_lanes]:
             self._on_ramp.discard(vid)
+            if vid in row_of and vid in self.trips:
+                self.trips[vid][1] = t
             if vid in row_of and vid not in self.controlled:
                 veh.setLaneChangeMode(vid, SUMO_DEFAULT_LANE_CHANGE_MODE)
 

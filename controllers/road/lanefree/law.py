@@ -107,6 +107,7 @@ class LaneFreeFlocking:
         self._yield_asked: set = set()  # the pairs of the last call of _patience
         self._urgent_now = np.zeros(0, bool)
         self._edges_plan = None
+        self._exit_roads = None  # (key, [through road, exit 1's funnel, ...]): see _roads
         self._k = 0
         # (N, all True (N,), all False (N,)): the scene's flags when every vehicle is a CAV
         self._flags_n: tuple = (-1, None, None)
@@ -196,7 +197,11 @@ class LaneFreeFlocking:
         narrowing = obs.road is not None and not obs.road.is_constant
         if narrowing or n_asked:
             if narrowing:
-                u_long = np.minimum(u_long, self._narrowing(obs, sc, {"hi": hi_n, "lo": lo_n}))
+                side = {"hi": hi_n, "lo": lo_n}
+                bound = np.full(n, np.inf)
+                for _k, rows, road in self._roads(obs):
+                    bound[rows] = self._narrowing(obs, sc, side, road)[rows]
+                u_long = np.minimum(u_long, bound)
             if n_asked:  # cooperation: yield to announced movers and held-up human drivers
                 u_long = np.minimum(u_long, self._yield(obs, sc, j, ask, u_yield))
             u[:, 0] = np.clip(u_long, self.long_min, self.long_max)
@@ -348,7 +353,15 @@ class LaneFreeFlocking:
             edges = obs.road.edges(sc.s[:n])
         elif obs.road is not None:
             ahead = np.maximum(p.edge_lookahead_min_m, sc.v[:n] * p.edge_lookahead_s)
-            edges = obs.road.narrowest(sc.s[:n], ahead)
+            edges = np.empty((n, 2))
+            for k, rows, road in self._roads(obs):
+                # a CAV bound for an exit looks no further than edge_lookahead_min_m: its
+                # road shifts sideways onto the strip, and the narrowest edges over a longer
+                # stretch (the road's right edge before the strip, the strip's left border
+                # near the gore) would leave no room between them
+                reach = ahead[rows] if k == 0 else np.minimum(ahead[rows],
+                                                               p.edge_lookahead_min_m)
+                edges[rows] = road.narrowest(sc.s[:n][rows], reach)
         elif obs.road_edges is not None:
             edges = obs.road_edges
         else:
@@ -361,7 +374,88 @@ class LaneFreeFlocking:
         return _c_writable(edges), loop_edges
 
     # ------------------------------------------------------------------ longitudinal
-    def _narrowing(self, obs, sc, side) -> np.ndarray:
+    def _roads(self, obs: Observation) -> list:
+        """``(k, rows, road)`` covering the CAVs: the road each group drives on (k = 0: on
+        the road, k >= 1: leaving by exit k; :mod:`controllers.road.exits`). Without exits
+        or entry strips, every CAV on ``obs.road``. With them: a CAV that stays on the road
+        on it without the exits' strips (their lanes lead off the road), one leaving by
+        exit k on its funnel (``exit_prepare_m``, ``exit_commit_m``): its strategic
+        purpose, a band at the exit's side that narrows to the strip before the gore. A
+        CAV whose body is not on an entry strip (an on-ramp's acceleration lane) drives
+        on its road without the strip: through traffic leaves it to the merging traffic
+        (a CAV merging from it keeps it until it is out). A CAV that stays on the road
+        with a human driver near (:meth:`_humans_near`) also keeps ``exit_keep_clear_m``
+        beside the exit's strip free for that driver to cross."""
+        n = obs.n
+        exits = obs.exits if obs.exits is not None and obs.exit_index is not None \
+            and len(obs.exits) else None
+        entries = obs.entries if obs.entries is not None and len(obs.entries) else None
+        if exits is None and entries is None:
+            return [(0, slice(None), obs.road)]
+        key = (id(obs.road), None if exits is None else exits.tobytes(),
+               None if entries is None else entries.tobytes())
+        if self._exit_roads is None or self._exit_roads[0] != key:
+            self._exit_roads = (key, self._purpose_roads(obs.road, exits, entries))
+        roads = self._exit_roads[1]
+        idx = (np.zeros(n, np.int64) if exits is None
+               else np.asarray(obs.exit_index, dtype=np.int64).reshape(n))
+        group = 4 * idx
+        if exits is not None:  # +2: keeps the band beside the strip clear (humans near)
+            group += 2 * ((idx == 0) & self._humans_near(obs))
+        if entries is not None:  # +1: on an entry strip (keeps it)
+            s, d = obs.q[:, 0], obs.q[:, 1]
+            half = 0.5 * (obs.width if obs.width is not None else np.full(n, 1.8))
+            on = np.zeros(n, bool)
+            for s0, s1, d_r, d_l in entries:
+                on |= (s >= s0 - 5.0) & (s <= s1) & (d - half < d_l - 0.05) \
+                    & (d + half > d_r + 0.05)
+            group += on
+        else:
+            group += 1
+        return [(g // 4, np.flatnonzero(group == g), roads[g])
+                for g in np.unique(group).tolist()]
+
+    #: A human driver within this distance ahead of (m, first) or behind (second) a CAV
+    #: that stays on the road makes it keep the band beside an exit's strip clear.
+    KEEP_CLEAR_REACH_M = (150.0, 50.0)
+
+    def _humans_near(self, obs: Observation) -> np.ndarray:
+        """(N,) bool: a moving vehicle that is not a CAV is within
+        :data:`KEEP_CLEAR_REACH_M` along the road (it may be bound for the exit, and CAVs
+        do not know; CAVs bound for it cross the band cooperatively)."""
+        n = obs.n
+        if obs.others_q is None or len(obs.others_q) == 0:
+            return np.zeros(n, bool)
+        hs = np.sort(obs.others_q[np.abs(obs.others_p[:, 0]) > 0.5, 0])
+        if not len(hs):
+            return np.zeros(n, bool)
+        ahead, behind = self.KEEP_CLEAR_REACH_M
+        s = obs.q[:, 0]
+        return np.searchsorted(hs, s + ahead, side="right") > np.searchsorted(hs, s - behind)
+
+    def _purpose_roads(self, road, exits, entries) -> list:
+        """Roads by group ``4 k + 2 keep_clear + on_entry`` (see :meth:`_roads`)."""
+        from controllers.road import exits as X
+
+        p = self.params
+        base = [road if exits is None else X.through_road(road, exits)]
+        if exits is not None:
+            for row in np.asarray(exits, dtype=float):
+                # the bound reaches the road's far edge exit_prepare_m before the gore
+                span = (float(np.max(road.left)) - row[3] if row[3] <= 1e-9
+                        else row[2] - float(np.min(road.right)))
+                slope = max(span, 0.0) / (p.exit_prepare_m - p.exit_commit_m)
+                base.append(X.exit_funnel(road, row, p.exit_prepare_m, p.exit_commit_m,
+                                          slope))
+        keep = (X.through_road(road, exits, p.exit_keep_clear_m, p.exit_commit_m)
+                if exits is not None else base[0])
+        out = []
+        for k, b in enumerate(base):
+            for view in (b, keep if k == 0 else b):  # group 4 k + 2 keep_clear + on_entry
+                out += [view if entries is None else X.through_road(view, entries), view]
+        return out
+
+    def _narrowing(self, obs, sc, side, road=None) -> np.ndarray:
         """Approach bound (N,) m/s^2 to the start of the first road piece ahead (within the
         look-ahead) whose edges exclude the CAV's body at its lateral position by more than
         it can still move sideways before it gets there; inf if none
@@ -369,7 +463,7 @@ class LaneFreeFlocking:
         pieces that start within its look-ahead; a vehicle alongside on the side the CAV
         must move to blocks it now)."""
         p = self.params
-        road = obs.road
+        road = obs.road if road is None else road
         out, _ = _kernels().narrowing_bound(
             self._pack(obs.dt), sc.s, sc.d, sc.v, sc.width, sc.length, sc.n, road.s0,
             road.right, road.left, bool(road.periodic), float(road.length_m),

@@ -93,6 +93,18 @@ class LaneFreeParams:
             narrowest edges within this time at its speed (at least this distance ahead) is
             seen at its nearest inside position there (a human driver about to be squeezed
             in by a narrowing), s and m.
+    Exits (a road with an off-ramp; :mod:`controllers.road.exits`):
+        exit_prepare_m: a CAV leaving by an exit is confined, from this distance before the
+            gore on, to a band at the road's right edge that narrows towards the exit's
+            strip (the road's width here, the strip's width at ``exit_commit_m``), m.
+        exit_commit_m: from this distance before the gore on it keeps to the strip; where
+            it cannot get in, it waits before this point for a gap rather than pass its
+            exit, m.
+        exit_keep_clear_m: a CAV that stays on the road, with a human driver near, keeps
+            this band beside an exit's strip free, from ``exit_commit_m`` before the
+            strip's start to the gore: the room through which vehicles bound for the exit
+            reach the strip (a human driver waiting there for a gap would otherwise wait for
+            the CAV beside it, and it for him), m.
     Comparison:
         lateral_mode: "free" (the lane-free law) or "fixed": every CAV keeps the lateral
             position it entered with (rows, or lanes on a lane network): the same
@@ -157,6 +169,9 @@ class LaneFreeParams:
     entry_horizon_s: float = 3.0
     squeeze_s: float = 3.0
     squeeze_min_m: float = 20.0
+    exit_prepare_m: float = 1000.0
+    exit_commit_m: float = 60.0
+    exit_keep_clear_m: float = 2.2
     lateral_mode: str = "free"
 
     def __post_init__(self) -> None:
@@ -191,13 +206,17 @@ class LaneFreeParams:
                      "bias_speed_low_mps", "urgent_gain_mps", "bias_speed_high_mps",
                      "queue_speed_mps", "queue_hysteresis", "congested_hysteresis_mps",
                      "entry_reach_m", "entry_horizon_s", "squeeze_s", "squeeze_min_m",
-                     "cut_in_gap_m", "cut_in_speed_margin_mps"):
+                     "cut_in_gap_m", "cut_in_speed_margin_mps", "exit_keep_clear_m"):
             if getattr(self, name) < 0:
                 raise ParameterError(f"{name} must be >= 0, got {getattr(self, name)!r}")
         if self.spacing_error_min_m > 0:
             raise ParameterError("spacing_error_min_m must be <= 0")
         if self.ff_gain > 1:
             raise ParameterError(f"ff_gain must be in [0, 1], got {self.ff_gain!r}")
+        if not 0 < self.exit_commit_m < self.exit_prepare_m:
+            raise ParameterError(f"exit_commit_m must be > 0 and < exit_prepare_m, got "
+                                 f"{self.exit_commit_m!r} (exit_prepare_m "
+                                 f"{self.exit_prepare_m!r})")
         if not 0 <= self.row_pull <= 1:
             raise ParameterError(f"row_pull must be in [0, 1], got {self.row_pull!r}")
 
