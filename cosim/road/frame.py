@@ -401,7 +401,7 @@ def load_road_network(
     net = read_sumo_net(path)
     try:
         road = _road_network(path, net, kind, main_route, ramp_route, periodic,
-                             speed_limit_mps)
+                             speed_limit_mps, offramp_route)
         if offramp_route:
             road = _with_offramp(road, net, tuple(offramp_route))
         if ramp_route and road.join_index > 0:
@@ -416,7 +416,8 @@ def load_road_network(
 
 def _road_network(path: Path, net: Any, kind: str, main_route: Sequence[str],
                   ramp_route: Sequence[str] | None, periodic: bool,
-                  speed_limit_mps: float | None) -> RoadNetwork:
+                  speed_limit_mps: float | None,
+                  offramp_route: Sequence[str] | None = None) -> RoadNetwork:
     """The body of :func:`load_road_network` (errors of unexpected geometry wrapped there)."""
     for eid in (*main_route, *(ramp_route or ())):
         if not net.hasEdge(eid):
@@ -434,9 +435,17 @@ def _road_network(path: Path, net: Any, kind: str, main_route: Sequence[str],
         known = {g.lane_id for g in lanes}
         lanes += [g for g in route_lanes(net, ramp_route, False, False, "ramp")
                   if g.lane_id not in known]
+    off_edges: tuple[str, ...] = ()
+    if offramp_route:  # its lanes (and the junction lanes onto it) in the frame: a
+        # vehicle on them is seen where SUMO draws it, projected onto the reference line
+        diverge = _diverge_edge(net, main_route, offramp_route, path)
+        known = {g.lane_id for g in lanes}
+        off_edges = tuple(offramp_route)
+        lanes += [g for g in route_lanes(net, (diverge, *offramp_route), False, False,
+                                         "off-ramp") if g.lane_id not in known]
     line = reference_line(net, main_route, periodic)
     index = {g.lane_id: k for k, g in enumerate(lanes)}
-    for eid in (*main_route, *(ramp_route or ())):
+    for eid in (*main_route, *(ramp_route or ()), *off_edges):
         index.setdefault(eid, index[reference_lane(net.getEdge(eid)).getID()])
     tb = build_tables(lanes, line, index)
     measure, chain_off = build_measure(tb, net, main_route, periodic)
@@ -528,26 +537,30 @@ def _with_entry_strip(road: RoadNetwork, net: Any) -> RoadNetwork:
     return replace(road, entry_lanes=tuple(reached), entry_strip=_strip(road, reached))
 
 
+def _diverge_edge(net: Any, main_route: Sequence[str], offramp: Sequence[str],
+                  path: Path) -> str:
+    """The main-route edge the off-ramp ``offramp`` leaves (the last one with a lane
+    connected to its first edge); NetworkError for an off-ramp the frame cannot use."""
+    for eid in offramp:
+        if not net.hasEdge(eid):
+            raise NetworkError(f"edge {eid!r} of the off-ramp route is not in network "
+                               f"{path.name}")
+    if offramp[0] in main_route:
+        raise NetworkError(f"the off-ramp route's first edge {offramp[0]!r} is on the main "
+                           f"route: it must leave it")
+    diverge = [e for e in main_route if connections(net.getEdge(e), offramp[0])]
+    if not diverge:
+        raise NetworkError(f"no main-route edge leads onto the off-ramp's first edge "
+                           f"{offramp[0]!r}")
+    return diverge[-1]
+
+
 def _with_offramp(road: RoadNetwork, net: Any, offramp: tuple[str, ...]) -> RoadNetwork:
     """``road`` with its off-ramp: the main-route edge it leaves (the last one with lanes
     connected to the off-ramp's first edge), those lanes and their extent in the frame."""
     from dataclasses import replace
 
-    for eid in offramp:
-        if not net.hasEdge(eid):
-            raise NetworkError(f"edge {eid!r} of the off-ramp route is not in network "
-                               f"{road.net_file.name}")
-    if offramp[0] in road.main_route:
-        raise NetworkError(f"the off-ramp route's first edge {offramp[0]!r} is on the main "
-                           f"route: it must leave it")
-    diverge = [e for e in road.main_route if connections(net.getEdge(e), offramp[0])]
-    if not diverge:
-        raise NetworkError(f"no main-route edge leads onto the off-ramp's first edge "
-                           f"{offramp[0]!r}")
-    edge = diverge[-1]
+    edge = _diverge_edge(net, road.main_route, offramp, road.net_file)
     lanes = sorted({c.getFromLane().getID() for c in connections(net.getEdge(edge), offramp[0])})
-    for a, b in zip(offramp, offramp[1:], strict=False):
-        if not connections(net.getEdge(a), b):
-            raise NetworkError(f"off-ramp edge {a!r} is not connected to the next edge {b!r}")
     return replace(road, offramp_route=offramp, diverge_edge=edge, exit_lanes=tuple(lanes),
                    exit_strip=_strip(road, lanes))

@@ -363,6 +363,7 @@ def trip_summary(trips, world) -> dict:
     missed, wrong = getattr(world, "missed_exits", {}), getattr(world, "wrong_exits", {})
     for kind in ("cav", "hdv"):
         out[f"exit_backstop_{kind}"] = int(missed.get(kind, 0) + wrong.get(kind, 0))
+    out["offramp_lateral_fixes"] = int(getattr(world, "offramp_lateral_fixes", 0))
     return out
 
 

@@ -179,6 +179,8 @@ class SumoWorld:
         #: an exit not theirs (sent down the off-ramp), by kind "cav" / "hdv"
         self.missed_exits = {"cav": 0, "hdv": 0}
         self.wrong_exits = {"cav": 0, "hdv": 0}
+        #: vehicles put back inside an off-ramp lane they stood across (see _exit_check)
+        self.offramp_lateral_fixes = 0
         self._exit_lanes = frozenset(net.exit_lanes)
         self._teleports = 0  # vehicles SUMO teleported so far (summed over the steps)
         self.dt = float(dt)
@@ -352,7 +354,7 @@ class SumoWorld:
             s = np.mod(s, self.period)
         on_main = self._code_main[codes] & ~np.isnan(s)
         if self.exits is not None:
-            if self._exit_check(ids, lane, pos, speed, on_main, is_cav, purpose):
+            if self._exit_check(ids, lane, pos, speed, on_main, is_cav, purpose, lat, width):
                 self._static_ids = None  # a purpose changed: rebuild the columns
                 return self.observe()
         is_static = np.zeros(n, dtype=bool)
@@ -370,7 +372,8 @@ class SumoWorld:
     EXIT_BACKSTOP_S = 1.0
     EXIT_BACKSTOP_MIN_M = 2.0
 
-    def _exit_check(self, ids, lanes, pos, speed, on_main, is_cav, purpose) -> bool:
+    def _exit_check(self, ids, lanes, pos, speed, on_main, is_cav, purpose, lat,
+                    width) -> bool:
         """Exits, for a road with an off-ramp: log each vehicle's time of leaving the main
         road by the off-ramp; hand a CAV that left back to SUMO (its speed and lane-change
         checks on again); the backstop: a vehicle still on the wrong lane just before the
@@ -378,7 +381,10 @@ class SumoWorld:
         catches a failure of the law. A human driver that has not reached the exit's lane
         by then drives on, as a driver who misses an exit does: SUMO's would stop at the
         lane's end and, standing, never move sideways (SL2015's lcMaxSpeedLatStanding is 0),
-        blocking the road for good. Returns True when a destination changed."""
+        blocking the road for good. And a vehicle standing on the off-ramp (its junction
+        lane included) with its body over the lane's side is put back inside it (counted
+        in :attr:`offramp_lateral_fixes`): SUMO's driver, which entered it late and askew,
+        would otherwise never move again. Returns True when a destination changed."""
         veh = self.ts.vehicle
         t = float(self.ts.simulation.getTime())
         trips, controlled = self.trips, self.controlled
@@ -389,6 +395,11 @@ class SumoWorld:
             trip = trips.get(vid)
             if trip is not None and np.isnan(trip[2]):
                 trip[2] = t
+            if speed[i] < 0.1 and vid not in controlled:
+                half = 0.5 * (self.net.lane_width.get(lanes[i], np.inf) - width[i])
+                if half > 0 and abs(lat[i]) > half + 0.05:
+                    veh.setLateralLanePosition(vid, float(np.clip(lat[i], -half, half)))
+                    self.offramp_lateral_fixes += 1
             if vid in controlled:  # left the road: SUMO drives it on the off-ramp
                 controlled.discard(vid)
                 self.v_lat_state.pop(vid, None)

@@ -305,8 +305,9 @@ class LaneFreeFlocking:
 
     def _entering(self, obs: Observation, oq: np.ndarray, op: np.ndarray,
                   ow: np.ndarray, v_lat: np.ndarray) -> np.ndarray:
-        """Lateral positions (M,) m of the sensed vehicles as the law uses them: a vehicle
-        still outside the road but about to merge (on an on-ramp: within ``entry_reach_m``
+        """Lateral positions (M,) m of the sensed vehicles as the law uses them (a vehicle
+        leaving by an exit where SUMO has it): a vehicle still outside the road but about
+        to merge (on an on-ramp: within ``entry_reach_m``
         of its edge, or reaching it within ``entry_horizon_s`` at its lateral speed towards
         the road) is taken to be on the road already, at its nearest inside position: CAVs
         behind it there keep their gap to it, CAVs beside it make room.
@@ -340,6 +341,15 @@ class LaneFreeFlocking:
                 lo_a = narrow[:, 0] + 0.5 * w + 0.1
                 hi_a = np.maximum(lo_a, narrow[:, 1] - 0.5 * w - 0.1)
                 d[moving] = np.clip(d[moving], lo_a, hi_a)
+        if obs.exits is not None and len(obs.exits):
+            # a vehicle on an exit's strip or past its gore on the exit's side is leaving:
+            # neither merging onto the road nor squeezed by the strip's end
+            for s_start, _s_gore, d_right, d_left in obs.exits:
+                if d_left <= 1e-9:
+                    leaving = (oq[:, 0] >= s_start) & (oq[:, 1] < d_left)
+                else:
+                    leaving = (oq[:, 0] >= s_start) & (oq[:, 1] > d_right)
+                d[leaving] = oq[leaving, 1]
         return d
 
     # ------------------------------------------------------------------ lateral target
