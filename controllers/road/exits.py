@@ -96,3 +96,16 @@ def exit_funnel(road: RoadProfile, exit_row: np.ndarray, prepare_m: float, commi
         bound = np.minimum(d_right - reach, left - band)
         right[on] = np.maximum(right[on], bound[on])
     return RoadProfile(s0, right, left, road.length_m, road.periodic)
+
+
+def strip_only(road: RoadProfile, strips: np.ndarray) -> RoadProfile:
+    """``road`` narrowed to the strips along their length (rows ``(s_start, s_end,
+    d_right, d_left)``, m): a vehicle on an acceleration strip that must stay on it; past
+    the strip's end the road (into which it must have merged) as it is."""
+    strips = np.asarray(strips, dtype=float).reshape(-1, 4)
+    s0, right, left = _pieces(road, strips[:, :2].ravel())
+    for s_start, s_end, d_right, d_left in strips:
+        on = (s0 >= s_start - 1e-9) & (s0 < s_end)
+        right[on] = np.maximum(right[on], d_right)
+        left[on] = np.minimum(left[on], d_left)
+    return RoadProfile(s0, right, np.maximum(left, right + 1e-3), road.length_m, road.periodic)

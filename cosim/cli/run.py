@@ -34,6 +34,12 @@ SUMMARY_KEYS = [
     ("safety_speed_activations", "safety: speed clips", "CAV-steps", "{:.0f}"),
     ("safety_side_activations", "safety: side clips", "CAV-steps", "{:.0f}"),
     ("safety_edge_activations", "safety: edge clips", "CAV-steps", "{:.0f}"),
+    ("missed_exits_cav", "missed exits (CAVs)", "veh", "{:.0f}"),
+    ("missed_exits_hdv", "missed exits (HDVs)", "veh", "{:.0f}"),
+    ("travel_time_main_main_s", "travel time main -> main", "s", "{:.1f}"),
+    ("travel_time_main_off_s", "travel time main -> off-ramp", "s", "{:.1f}"),
+    ("travel_time_ramp_main_s", "travel time on-ramp -> main", "s", "{:.1f}"),
+    ("travel_time_ramp_off_s", "travel time on-ramp -> off-ramp", "s", "{:.1f}"),
     ("teleports", "teleports", "veh", "{:.0f}"),
     ("wall_time_s", "wall time", "s", "{:.1f}"),
 ]
@@ -47,6 +53,10 @@ MISSING = {
     "median_time_headway_s": "no moving follower",
     "min_ttc_s": "nobody closing in",
     "space_mean_speed_mps": "zone empty",
+    "travel_time_main_main_s": "no trip arrived",
+    "travel_time_main_off_s": "no trip arrived",
+    "travel_time_ramp_main_s": "no trip arrived",
+    "travel_time_ramp_off_s": "no trip arrived",
 }
 
 
@@ -142,8 +152,11 @@ def cmd_run(ns) -> int:
     prepare_output_dir(out, replace=ns.replace, what="run output folder")
     res.write(out)
     print(format_summary(res.summary.iloc[0].to_dict()))
+    extra = "".join(f"{name}, " for name, table in (("trajectories.csv", res.trajectories),
+                                                     ("trips.csv", res.trips))
+                    if table is not None)
     print(f"outputs written to {out}/ (summary.csv, intervals.csv, flock.csv, collisions.csv, "
-          "config.toml, meta.json)")
+          f"{extra}config.toml, meta.json)")
     return 0
 
 

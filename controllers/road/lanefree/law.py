@@ -199,7 +199,7 @@ class LaneFreeFlocking:
             if narrowing:
                 side = {"hi": hi_n, "lo": lo_n}
                 bound = np.full(n, np.inf)
-                for _k, rows, road in self._roads(obs):
+                for _k, rows, road, _cap in self._roads(obs):
                     bound[rows] = self._narrowing(obs, sc, side, road)[rows]
                 u_long = np.minimum(u_long, bound)
             if n_asked:  # cooperation: yield to announced movers and held-up human drivers
@@ -364,14 +364,8 @@ class LaneFreeFlocking:
         elif obs.road is not None:
             ahead = np.maximum(p.edge_lookahead_min_m, sc.v[:n] * p.edge_lookahead_s)
             edges = np.empty((n, 2))
-            for k, rows, road in self._roads(obs):
-                # a CAV bound for an exit looks no further than edge_lookahead_min_m: its
-                # road shifts sideways onto the strip, and the narrowest edges over a longer
-                # stretch (the road's right edge before the strip, the strip's left border
-                # near the gore) would leave no room between them
-                reach = ahead[rows] if k == 0 else np.minimum(ahead[rows],
-                                                               p.edge_lookahead_min_m)
-                edges[rows] = road.narrowest(sc.s[:n][rows], reach)
+            for _k, rows, road, cap in self._roads(obs):
+                edges[rows] = road.narrowest(sc.s[:n][rows], np.minimum(ahead[rows], cap))
         elif obs.road_edges is not None:
             edges = obs.road_edges
         else:
@@ -385,49 +379,74 @@ class LaneFreeFlocking:
 
     # ------------------------------------------------------------------ longitudinal
     def _roads(self, obs: Observation) -> list:
-        """``(k, rows, road)`` covering the CAVs: the road each group drives on (k = 0: on
-        the road, k >= 1: leaving by exit k; :mod:`controllers.road.exits`). Without exits
-        or entry strips, every CAV on ``obs.road``. With them: a CAV that stays on the road
-        on it without the exits' strips (their lanes lead off the road), one leaving by
-        exit k on its funnel (``exit_prepare_m``, ``exit_commit_m``): its strategic
-        purpose, a band at the exit's side that narrows to the strip before the gore. A
-        CAV whose body is not on an entry strip (an on-ramp's acceleration lane) drives
-        on its road without the strip: through traffic leaves it to the merging traffic
-        (a CAV merging from it keeps it until it is out). A CAV that stays on the road
-        with a human driver near (:meth:`_humans_near`) also keeps ``exit_keep_clear_m``
-        beside the exit's strip free for that driver to cross."""
+        """``(k, rows, road, reach_m)`` covering the CAVs: the road each group drives on
+        (k = 0: on the road, k >= 1: leaving by exit k; :mod:`controllers.road.exits`) and
+        how far ahead (m) its band edges look at most. Without exits or entry strips, every
+        CAV on ``obs.road``. With them:
+
+        * a CAV that stays on the road drives on it without the exits' strips (their lanes
+          lead off the road); one leaving by exit k on its funnel (``exit_prepare_m``,
+          ``exit_commit_m``): its strategic purpose, a band at the exit's side that
+          narrows to the strip before the gore. It looks no further than
+          ``edge_lookahead_min_m`` for its band edges: its road shifts sideways onto the
+          strip, and the narrowest edges over a longer stretch (the road's right edge
+          before the strip, the strip's left border near the gore) leave no room between
+          them;
+        * a CAV that stays on the road with a human driver near (:meth:`_humans_near`)
+          keeps ``exit_keep_clear_m`` beside the exit's strip free for that driver to
+          cross;
+        * a CAV whose body is not on an entry strip (an on-ramp's acceleration lane) drives
+          on its road without the strip: through traffic leaves it to merging traffic;
+        * a CAV on an entry strip with a human driver in the road's band beside the strip,
+          behind or alongside it (:meth:`_humans_beside_strip`), keeps to the strip: it
+          merges in front of CAVs, which yield, but not across the path of a driver who
+          does not (SUMO's drivers do not see a vehicle that reaches over their lane's
+          border from the lane beside it, so one that straddles it in front of them is
+          hit from behind). Its band edges are those where it is (ahead the strip ends:
+          the narrowing bound stops it before the end, inside the strip)."""
         n = obs.n
         exits = obs.exits if obs.exits is not None and obs.exit_index is not None \
             and len(obs.exits) else None
         entries = obs.entries if obs.entries is not None and len(obs.entries) else None
         if exits is None and entries is None:
-            return [(0, slice(None), obs.road)]
+            return [(0, slice(None), obs.road, np.inf)]
         key = (id(obs.road), None if exits is None else exits.tobytes(),
                None if entries is None else entries.tobytes())
         if self._exit_roads is None or self._exit_roads[0] != key:
-            self._exit_roads = (key, self._purpose_roads(obs.road, exits, entries))
-        roads = self._exit_roads[1]
+            self._exit_roads = (key, {})
+        cache = self._exit_roads[1]
         idx = (np.zeros(n, np.int64) if exits is None
                else np.asarray(obs.exit_index, dtype=np.int64).reshape(n))
-        group = 4 * idx
-        if exits is not None:  # +2: keeps the band beside the strip clear (humans near)
-            group += 2 * ((idx == 0) & self._humans_near(obs))
-        if entries is not None:  # +1: on an entry strip (keeps it)
+        keep = ((idx == 0) & self._humans_near(obs)) if exits is not None \
+            else np.zeros(n, bool)
+        view = np.ones(n, np.int64)  # 0: off the entry strips, 1: on one, 2: strip only
+        if entries is not None:
             s, d = obs.q[:, 0], obs.q[:, 1]
             half = 0.5 * (obs.width if obs.width is not None else np.full(n, 1.8))
             on = np.zeros(n, bool)
             for s0, s1, d_r, d_l in entries:
                 on |= (s >= s0 - 5.0) & (s <= s1) & (d - half < d_l - 0.05) \
                     & (d + half > d_r + 0.05)
-            group += on
-        else:
-            group += 1
-        return [(g // 4, np.flatnonzero(group == g), roads[g])
-                for g in np.unique(group).tolist()]
+            view = np.where(on, 1, 0)
+            if on.any():
+                view[on & self._humans_beside_strip(obs, entries)] = 2
+        group = (idx * 2 + keep) * 3 + view
+        out = []
+        for g in np.unique(group).tolist():
+            if g not in cache:
+                cache[g] = self._purpose_road(obs.road, exits, entries, g // 6,
+                                              bool((g // 3) % 2), g % 3)
+            cap = (0.0 if g % 3 == 2 else self.params.edge_lookahead_min_m if g // 6 else
+                   np.inf)
+            out.append((g // 6, np.flatnonzero(group == g), cache[g], cap))
+        return out
 
     #: A human driver within this distance ahead of (m, first) or behind (second) a CAV
     #: that stays on the road makes it keep the band beside an exit's strip clear.
     KEEP_CLEAR_REACH_M = (150.0, 50.0)
+    #: A human driver in the road's band of this width (m) beside an entry strip, from
+    #: this far behind (m) to this far ahead of (m) a CAV on the strip, keeps it there.
+    BESIDE_STRIP = (3.0, 80.0, 5.0)
 
     def _humans_near(self, obs: Observation) -> np.ndarray:
         """(N,) bool: a moving vehicle that is not a CAV is within
@@ -443,27 +462,52 @@ class LaneFreeFlocking:
         s = obs.q[:, 0]
         return np.searchsorted(hs, s + ahead, side="right") > np.searchsorted(hs, s - behind)
 
-    def _purpose_roads(self, road, exits, entries) -> list:
-        """Roads by group ``4 k + 2 keep_clear + on_entry`` (see :meth:`_roads`)."""
+    def _humans_beside_strip(self, obs: Observation, entries: np.ndarray) -> np.ndarray:
+        """(N,) bool: a moving vehicle that is not a CAV has its body in the road's band of
+        ``BESIDE_STRIP[0]`` m beside an entry strip, between ``BESIDE_STRIP[1]`` m behind
+        and ``BESIDE_STRIP[2]`` m ahead of the CAV."""
+        n = obs.n
+        out = np.zeros(n, bool)
+        if obs.others_q is None or len(obs.others_q) == 0:
+            return out
+        band, behind, ahead = self.BESIDE_STRIP
+        moving = np.abs(obs.others_p[:, 0]) > 0.5
+        oq = obs.others_q[moving]
+        half = 0.5 * obs.others_width[moving]
+        s = obs.q[:, 0]
+        for s0, s1, d_r, d_l in entries:
+            if d_l <= 1e-9:  # strip on the right: the band left of it
+                near = (oq[:, 1] - half < d_l + band) & (oq[:, 1] + half > d_l)
+            else:
+                near = (oq[:, 1] + half > d_r - band) & (oq[:, 1] - half < d_r)
+            hs = np.sort(oq[near & (oq[:, 0] >= s0 - behind) & (oq[:, 0] <= s1 + ahead), 0])
+            if len(hs):
+                out |= np.searchsorted(hs, s + ahead, side="right") > np.searchsorted(
+                    hs, s - behind)
+        return out
+
+    def _purpose_road(self, road, exits, entries, k: int, keep: bool, view: int):
+        """The road of group (exit ``k``, keeping the band clear, entry ``view``)."""
         from controllers.road import exits as X
 
         p = self.params
-        base = [road if exits is None else X.through_road(road, exits)]
-        if exits is not None:
-            for row in np.asarray(exits, dtype=float):
-                # the bound reaches the road's far edge exit_prepare_m before the gore
-                span = (float(np.max(road.left)) - row[3] if row[3] <= 1e-9
-                        else row[2] - float(np.min(road.right)))
-                slope = max(span, 0.0) / (p.exit_prepare_m - p.exit_commit_m)
-                base.append(X.exit_funnel(road, row, p.exit_prepare_m, p.exit_commit_m,
-                                          slope))
-        keep = (X.through_road(road, exits, p.exit_keep_clear_m, p.exit_commit_m)
-                if exits is not None else base[0])
-        out = []
-        for k, b in enumerate(base):
-            for view in (b, keep if k == 0 else b):  # group 4 k + 2 keep_clear + on_entry
-                out += [view if entries is None else X.through_road(view, entries), view]
-        return out
+        if exits is None:
+            base = road
+        elif k == 0:
+            base = (X.through_road(road, exits, p.exit_keep_clear_m, p.exit_commit_m) if keep
+                    else X.through_road(road, exits))
+        else:
+            row = np.asarray(exits, dtype=float)[k - 1]
+            # the bound reaches the road's far edge exit_prepare_m before the gore
+            span = (float(np.max(road.left)) - row[3] if row[3] <= 1e-9
+                    else row[2] - float(np.min(road.right)))
+            slope = max(span, 0.0) / (p.exit_prepare_m - p.exit_commit_m)
+            base = X.exit_funnel(road, row, p.exit_prepare_m, p.exit_commit_m, slope)
+        if entries is None or view == 1:
+            return base
+        if view == 0:
+            return X.through_road(base, entries)
+        return X.strip_only(base, entries)
 
     def _narrowing(self, obs, sc, side, road=None) -> np.ndarray:
         """Approach bound (N,) m/s^2 to the start of the first road piece ahead (within the

@@ -8,6 +8,8 @@
   edges (and lane lines of the three-lane baseline) drawn; :func:`top_view_animation`
   the same animated, written as a GIF by :func:`animate_top_view`.
 * :func:`road_geometry`: road edges, lane lines and ring period from a ``[network]`` table.
+* :func:`n_curves_figure`: cumulative counts at an on-ramp's merge and an off-ramp, from
+  ``trips.csv``.
 * :func:`plot_run`: the run figures of a run folder (road geometry and scenario name
   from config.toml), written with :func:`cosim.analysis.figures.output.save`.
 """
@@ -303,13 +305,16 @@ def road_geometry(network: dict) -> tuple[Edges | None, list[float], float | Non
     """Road edges function, lane-line offsets and ring period from a ``[network]`` table.
 
     Straight, ring, on-ramp (main road) and three-lane roads: ``+-width_m/2``;
-    varying width: piecewise from ``width_profile``; a user's ``file``: unknown (None).
+    varying width: piecewise from ``width_profile``; the corridor: with its ramp strips;
+    a user's ``file``: unknown (None).
     """
     kind = network.get("kind", "straight")
     width = float(network.get("width_m", 10.2))
     period = float(network.get("circumference_m", 0.0)) if kind == "ring" else None
     if kind == "file":
         return None, [], None
+    if kind == "corridor":
+        return _corridor_edges(network, width)
     if kind == "varying_width" and network.get("width_profile"):
         prof = np.asarray(network["width_profile"], dtype=float)
         ends = np.cumsum(prof[:, 0])
@@ -327,6 +332,52 @@ def road_geometry(network: dict) -> tuple[Edges | None, list[float], float | Non
 
     lanes = [-width / 2 + width / 3, width / 2 - width / 3] if kind == "three_lane" else []
     return const, lanes, period
+
+
+def _corridor_edges(network: dict, width: float):
+    """Edges and lane lines of the corridor (:func:`road_geometry`): the 10.2 m road and its
+    ramp strips on the right (their border with the road drawn as a lane line)."""
+    strip = float(network.get("ramp_width_m", 3.0))
+    merge = float(network.get("merge_position_m", 1000.0))
+    acc = float(network.get("acceleration_lane_m", 482.0))
+    gore = float(network.get("diverge_position_m", 2500.0))
+    dec = float(network.get("deceleration_lane_m", 342.0))
+    lanes = int(network.get("lanes", 1))
+
+    def edges(s):
+        s = np.asarray(s, float)
+        on = ((s >= merge) & (s <= merge + acc)) | ((s >= gore - dec) & (s <= gore))
+        return np.where(on, -width / 2 - strip, -width / 2), np.full(s.shape, width / 2)
+
+    lines = [-width / 2 + width * k / lanes for k in range(1, lanes)] + [-width / 2]
+    return edges, lines, None
+
+
+def n_curves_figure(trips: pd.DataFrame | str | Path, title: str | None = None):
+    """Cumulative counts (N-curves; Cassidy & Bertini 1999) of a run's trips (``trips.csv``):
+    at the merge, the on-ramp's vehicles departing and joining the road; at the off-ramp,
+    the vehicles bound for it departing and leaving the road there, CAVs and human drivers
+    apart (the vertical distance is the number between, the horizontal one the time taken
+    by the vehicle of that rank). A matplotlib Figure, not saved."""
+    tr = pd.read_csv(trips) if isinstance(trips, str | Path) else trips
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4), sharey=False)
+    panels = (("on-ramp merge", tr["origin"] == "ramp", "merge_s", "joined the road"),
+              ("off-ramp", tr["destination"] == "off", "exit_s", "left by the off-ramp"))
+    for ax, (name, sel, col, label) in zip(axes, panels, strict=True):
+        for kind, colour in (("cav", CAV_COLOUR), ("hdv", HDV_COLOUR)):
+            g = tr[sel & (tr["kind"] == kind)]
+            for times, style, what in ((g["depart_s"], ":", "departed"), (g[col], "-", label)):
+                t = np.sort(pd.to_numeric(times, errors="coerce").dropna().to_numpy(float))
+                if len(t):
+                    ax.step(t, np.arange(1, len(t) + 1), where="post", color=colour,
+                            linestyle=style, label=f"{kind.upper()}s {what}")
+        ax.set_title(name)
+        ax.set_xlabel("time t, s")
+        ax.set_ylabel("cumulative count N, veh")
+        ax.legend(fontsize=7)
+    fig.suptitle(title or "N-curves")
+    fig.tight_layout()
+    return fig
 
 
 def plot_run(
@@ -357,6 +408,9 @@ def plot_run(
                              title=f"Top view: {name}"),
              out / f"{prefix}top_view.png"),
     ]
+    if (run_dir / "trips.csv").is_file():
+        files.append(save(n_curves_figure(run_dir / "trips.csv", title=f"N-curves: {name}"),
+                          out / f"{prefix}n_curves.png"))
     if animate:
         files.append(animate_top_view(tr, out / f"{prefix}top_view.gif", t_range=t_range,
                                       edges=edges, lane_lines=lanes, title=f"Top view: {name}"))
