@@ -217,6 +217,9 @@ class Loop:
         edges = self.world.road.narrowest(q[:, 0], stop)
         for k, road in self._exit_roads(state, rows):  # leaving CAVs: the strip goes on
             edges[k] = road.narrowest(q[k, 0], stop[k])
+        on_strip = self._on_entry_strip(q, width)
+        if on_strip is not None:  # merging CAVs: the edges where they are (see there)
+            edges[on_strip] = self.world.road.edges(q[on_strip, 0])
         all_ids = state.ids
         # the observation's arrays are built here in their final form (float64, the
         # documented shapes): the constructor's checks and conversions are skipped
@@ -236,6 +239,22 @@ class Loop:
             others_ids=oids, road_edges=edges, period_s=self.world.period,
             desired_speed=desired, road=self.world.road, **self._exits(state, rows),
         )
+
+    def _on_entry_strip(self, q: np.ndarray, width: np.ndarray) -> np.ndarray | None:
+        """(N,) bool: the CAV's body is on an entry strip (an on-ramp's acceleration lane
+        beside the road), or None (no strip, or nobody on one). Such a CAV is bounded by
+        the road's edges where it is, not by the narrowest over its stopping distance: the
+        strip ends ahead, and a CAV that cannot merge yet stops before its end (the
+        safety layer's wall rule) rather than be pushed over the border into the road in
+        front of traffic that has not made room for it."""
+        entries = getattr(self.world, "entries", None)
+        if entries is None or not len(q):
+            return None
+        s, d, half = q[:, 0], q[:, 1], 0.5 * width
+        on = np.zeros(len(q), bool)
+        for s0, s1, d_r, d_l in entries:
+            on |= (s >= s0) & (s <= s1) & (d - half < d_l - 0.05) & (d + half > d_r + 0.05)
+        return on if on.any() else None
 
     def _exit_roads(self, state: RoadSnapshot, rows: np.ndarray) -> list:
         """``(CAV indices, road)`` for the CAVs leaving by an exit: the road with the exit's

@@ -428,7 +428,7 @@ class LaneFreeFlocking:
                 on |= (s >= s0 - 5.0) & (s <= s1) & (d - half < d_l - 0.05) \
                     & (d + half > d_r + 0.05)
             view = np.where(on, 1, 0)
-            if on.any():
+            if on.any() and self.STRIP_ONLY_BESIDE_HUMANS:
                 view[on & self._humans_beside_strip(obs, entries)] = 2
         group = (idx * 2 + keep) * 3 + view
         out = []
@@ -441,12 +441,18 @@ class LaneFreeFlocking:
             out.append((g // 6, np.flatnonzero(group == g), cache[g], cap))
         return out
 
+    #: Keep a CAV on an entry strip there while a human driver in the band beside it will
+    #: reach it soon (view 2 of :meth:`_roads`; :meth:`_humans_beside_strip`).
+    STRIP_ONLY_BESIDE_HUMANS = True
+
     #: A human driver within this distance ahead of (m, first) or behind (second) a CAV
     #: that stays on the road makes it keep the band beside an exit's strip clear.
     KEEP_CLEAR_REACH_M = (150.0, 50.0)
-    #: A human driver in the road's band of this width (m) beside an entry strip, from
-    #: this far behind (m) to this far ahead of (m) a CAV on the strip, keeps it there.
-    BESIDE_STRIP = (3.0, 80.0, 5.0)
+    #: A human driver in the road's band of this width (m) beside an entry strip keeps a
+    #: CAV on the strip there from this far ahead of it (m) to a distance behind it of
+    #: ``BESIDE_STRIP[2]`` m plus his speed times ``BESIDE_STRIP[3]`` s plus his closing
+    #: speed times ``BESIDE_STRIP[4]`` s: he will be alongside before it has merged.
+    BESIDE_STRIP = (3.0, 5.0, 10.0, 1.0, 3.0)
 
     def _humans_near(self, obs: Observation) -> np.ndarray:
         """(N,) bool: a moving vehicle that is not a CAV is within
@@ -464,26 +470,30 @@ class LaneFreeFlocking:
 
     def _humans_beside_strip(self, obs: Observation, entries: np.ndarray) -> np.ndarray:
         """(N,) bool: a moving vehicle that is not a CAV has its body in the road's band of
-        ``BESIDE_STRIP[0]`` m beside an entry strip, between ``BESIDE_STRIP[1]`` m behind
-        and ``BESIDE_STRIP[2]`` m ahead of the CAV."""
+        ``BESIDE_STRIP[0]`` m beside an entry strip, at most ``BESIDE_STRIP[1]`` m ahead
+        of the CAV and closer behind it than the reach of :data:`BESIDE_STRIP`. One loop
+        over the CAVs on a strip (few) against the drivers in the band (few)."""
         n = obs.n
         out = np.zeros(n, bool)
         if obs.others_q is None or len(obs.others_q) == 0:
             return out
-        band, behind, ahead = self.BESIDE_STRIP
+        band, ahead, base_m, own_s, closing_s = self.BESIDE_STRIP
         moving = np.abs(obs.others_p[:, 0]) > 0.5
-        oq = obs.others_q[moving]
+        oq, v_h = obs.others_q[moving], obs.others_p[moving, 0]
         half = 0.5 * obs.others_width[moving]
-        s = obs.q[:, 0]
         for s0, s1, d_r, d_l in entries:
             if d_l <= 1e-9:  # strip on the right: the band left of it
                 near = (oq[:, 1] - half < d_l + band) & (oq[:, 1] + half > d_l)
             else:
                 near = (oq[:, 1] + half > d_r - band) & (oq[:, 1] - half < d_r)
-            hs = np.sort(oq[near & (oq[:, 0] >= s0 - behind) & (oq[:, 0] <= s1 + ahead), 0])
-            if len(hs):
-                out |= np.searchsorted(hs, s + ahead, side="right") > np.searchsorted(
-                    hs, s - behind)
+            near &= (oq[:, 0] >= s0 - 200.0) & (oq[:, 0] <= s1 + ahead)
+            if not near.any():
+                continue
+            sh, vh = oq[near, 0], v_h[near]
+            for i in np.flatnonzero(obs.q[:, 0] <= s1 + ahead).tolist():
+                ds = obs.q[i, 0] - sh  # > 0: the driver is behind
+                reach = base_m + own_s * vh + closing_s * np.maximum(vh - obs.p[i, 0], 0.0)
+                out[i] |= bool(np.any((ds > -ahead) & (ds < reach)))
         return out
 
     def _purpose_road(self, road, exits, entries, k: int, keep: bool, view: int):
