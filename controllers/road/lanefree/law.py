@@ -453,6 +453,9 @@ class LaneFreeFlocking:
     #: ``BESIDE_STRIP[2]`` m plus his speed times ``BESIDE_STRIP[3]`` s plus his closing
     #: speed times ``BESIDE_STRIP[4]`` s: he will be alongside before it has merged.
     BESIDE_STRIP = (3.0, 5.0, 10.0, 1.0, 3.0)
+    #: The reach of :data:`BESIDE_STRIP` times these for a CAV still on the strip (first)
+    #: and for one already over its border (second).
+    BESIDE_STRIP_HYSTERESIS = (1.5, 0.5)
 
     def _humans_near(self, obs: Observation) -> np.ndarray:
         """(N,) bool: a moving vehicle that is not a CAV is within
@@ -490,9 +493,17 @@ class LaneFreeFlocking:
             if not near.any():
                 continue
             sh, vh = oq[near, 0], v_h[near]
+            w = obs.width if obs.width is not None else np.full(n, 1.8)
+            over = (obs.q[:, 1] + 0.5 * w > d_l + 0.05) if d_l <= 1e-9 else \
+                (obs.q[:, 1] - 0.5 * w < d_r - 0.05)
             for i in np.flatnonzero(obs.q[:, 0] <= s1 + ahead).tolist():
                 ds = obs.q[i, 0] - sh  # > 0: the driver is behind
                 reach = base_m + own_s * vh + closing_s * np.maximum(vh - obs.p[i, 0], 0.0)
+                # hysteresis: a merge starts only with room to spare and, once over the
+                # border, is called off only for a driver much closer (called off, the CAV
+                # stands across the border braking, unseen by SUMO's driver)
+                reach = reach * (self.BESIDE_STRIP_HYSTERESIS[1] if over[i]
+                                 else self.BESIDE_STRIP_HYSTERESIS[0])
                 out[i] |= bool(np.any((ds > -ahead) & (ds < reach)))
         return out
 
