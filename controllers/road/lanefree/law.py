@@ -455,7 +455,7 @@ class LaneFreeFlocking:
     BESIDE_STRIP = (3.0, 5.0, 10.0, 1.0, 3.0)
     #: The reach of :data:`BESIDE_STRIP` times these for a CAV still on the strip (first)
     #: and for one already over its border (second).
-    BESIDE_STRIP_HYSTERESIS = (1.5, 0.5)
+    BESIDE_STRIP_HYSTERESIS = (1.0, 0.5)
 
     def _humans_near(self, obs: Observation) -> np.ndarray:
         """(N,) bool: a moving vehicle that is not a CAV is within
