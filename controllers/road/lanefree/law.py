@@ -452,7 +452,7 @@ class LaneFreeFlocking:
     #: CAV on the strip there from this far ahead of it (m) to a distance behind it of
     #: ``BESIDE_STRIP[2]`` m plus his speed times ``BESIDE_STRIP[3]`` s plus his closing
     #: speed times ``BESIDE_STRIP[4]`` s: he will be alongside before it has merged.
-    BESIDE_STRIP = (3.0, 5.0, 10.0, 1.0, 3.0)
+    BESIDE_STRIP = (3.0, 5.0, 10.0, 1.0, 2.5)
     #: The reach of :data:`BESIDE_STRIP` times these for a CAV still on the strip (first)
     #: and for one already over its border (second).
     BESIDE_STRIP_HYSTERESIS = (1.0, 0.5)
