@@ -5,8 +5,12 @@ is missing), then judge the folder. Bad options are one ``error:`` line, exit 2.
 from __future__ import annotations
 
 import argparse
+import math
 from collections.abc import Callable
 from pathlib import Path
+
+import numpy as np
+import pandas as pd
 
 from cosim.cli.errors import run_command
 from cosim.errors import ConfigError
@@ -46,3 +50,30 @@ def main(argv: list[str] | None, name: str, doc: str,
         return report(out, ns.smoke)
 
     return run_command(cmd, ap.parse_args(argv))
+
+
+def arm_of(variant: str) -> str:
+    """The arm of a variant named ``ARM#SEED``."""
+    return variant.split("#", 1)[0]
+
+
+def numbers(frame: pd.DataFrame, col: str) -> np.ndarray:
+    """Column ``col`` of ``frame`` as floats (NaN where missing or not a number)."""
+    if col not in frame:
+        return np.full(len(frame), np.nan)
+    return pd.to_numeric(frame[col], errors="coerce").to_numpy(float)
+
+
+def check_rows(arm: str, criteria: list, n_runs: int, failed: bool) -> list[dict]:
+    """One row per ``(name, values (seeds,), limit, unit)`` of ``criteria``: the worst
+    seed and whether every one of the ``n_runs`` runs kept ``values <= limit`` (a run
+    that failed, or no run, fails the check)."""
+    rows = []
+    for name, vals, limit, unit in criteria:
+        good = np.isfinite(vals) & (vals <= limit)
+        worst = float(np.nanmax(vals)) if np.isfinite(vals).any() else math.nan
+        rows.append({"arm": arm, "check": name, "worst_seed": worst,
+                     "criterion": f"<= {limit:g} {unit}", "n_runs": n_runs,
+                     "passed": bool(good.all()) and not failed and n_runs > 0,
+                     "note": "runs failed" if failed else ""})
+    return rows

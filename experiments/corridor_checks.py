@@ -51,6 +51,7 @@ import pandas as pd
 
 from cosim.errors import ConfigError
 from experiments import check_cli
+from experiments.check_cli import arm_of, numbers
 from experiments.lanefree_checks import _markdown
 
 SEEDS = (1, 2, 3)
@@ -87,18 +88,8 @@ def plan_data(_out: Path, smoke: bool) -> dict:
     }
 
 
-def arm_of(variant: str) -> str:
-    return variant.split("#", 1)[0]
-
-
 def share_of(arm: str) -> int:
     return int(arm.rsplit("/cav", 1)[1]) if "/cav" in arm else 0
-
-
-def _num(frame: pd.DataFrame, col: str) -> np.ndarray:
-    if col not in frame:
-        return np.full(len(frame), np.nan)
-    return pd.to_numeric(frame[col], errors="coerce").to_numpy(float)
 
 
 def _mean(vals: np.ndarray) -> float:
@@ -114,41 +105,35 @@ def evaluate(results: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
         pct = share_of(arm)
         ok = g[g["status"] == "ok"]
         failed = len(ok) < len(g)
-        cav_coll = np.nan_to_num(_num(ok, "collisions_sumo_cav")) + _num(
+        cav_coll = np.nan_to_num(numbers(ok, "collisions_sumo_cav")) + numbers(
             ok, "collisions_geometric_cav")
         crit = []
         if pct > 0:
-            exits = (_num(ok, "missed_exits_cav") + _num(ok, "wrong_exits_cav")
-                     + _num(ok, "exit_backstop_cav"))
+            exits = (numbers(ok, "missed_exits_cav") + numbers(ok, "wrong_exits_cav")
+                     + numbers(ok, "exit_backstop_cav"))
             crit += [("CAV collisions (SUMO + ours)", cav_coll, 0.0, "events"),
-                     ("CAV steps outside the road", _num(ok, "boundary_vehicle_steps_cav"),
+                     ("CAV steps outside the road", numbers(ok, "boundary_vehicle_steps_cav"),
                       0.0, "CAV-steps"),
                      ("CAV exits missed, wrong or by the backstop", exits, 0.0, "CAVs")]
         if pct >= 50:
-            crit += [("longest standstill", _num(ok, "max_standstill_s"), STANDSTILL_MAX_S,
+            crit += [("longest standstill", numbers(ok, "max_standstill_s"), STANDSTILL_MAX_S,
                       "s"),
-                     ("blocked windows", _num(ok, "blocked_windows"), 0.0, "windows")]
-        for name, vals, limit, unit in crit:
-            good = np.isfinite(vals) & (vals <= limit)
-            worst = float(np.nanmax(vals)) if np.isfinite(vals).any() else math.nan
-            checks.append({"arm": arm, "check": name, "worst_seed": worst,
-                           "criterion": f"<= {limit:g} {unit}", "n_runs": len(ok),
-                           "passed": bool(good.all()) and not failed and len(ok) > 0,
-                           "note": "runs failed" if failed else ""})
-        cav_km = _num(ok, "cav_vehicle_km")
-        activations = (_num(ok, "safety_edge_activations") + _num(ok, "safety_side_activations")
-                       + _num(ok, "safety_speed_activations"))
+                     ("blocked windows", numbers(ok, "blocked_windows"), 0.0, "windows")]
+        checks += check_cli.check_rows(arm, crit, len(ok), failed)
+        cav_km = numbers(ok, "cav_vehicle_km")
+        activations = sum(numbers(ok, f"safety_{rule}_activations")
+                          for rule in ("edge", "side", "speed"))
         row = {"arm": arm, "n_runs": len(ok),
-               "weaving_flow_vph": _mean(_num(ok, "edie_flow_vph")),
-               "weaving_speed_mps": _mean(_num(ok, "space_mean_speed_mps")),
+               "weaving_flow_vph": _mean(numbers(ok, "edie_flow_vph")),
+               "weaving_speed_mps": _mean(numbers(ok, "space_mean_speed_mps")),
                "cav_collisions_max": np.nanmax(cav_coll) if pct > 0 and len(ok) else math.nan,
-               "hdv_missed_exits": _mean(_num(ok, "missed_exits_hdv")) if pct < 100
+               "hdv_missed_exits": _mean(numbers(ok, "missed_exits_hdv")) if pct < 100
                else math.nan,
-               "longest_standstill_s_max": np.nanmax(_num(ok, "max_standstill_s"))
+               "longest_standstill_s_max": np.nanmax(numbers(ok, "max_standstill_s"))
                if len(ok) else math.nan}
         for od in OD_PAIRS:
-            row[f"travel_time_{od}_s"] = _mean(_num(ok, f"travel_time_{od}_s"))
-        row["harsh_accel_share_cav"] = _mean(_num(ok, "harsh_accel_share_cav")) if pct else \
+            row[f"travel_time_{od}_s"] = _mean(numbers(ok, f"travel_time_{od}_s"))
+        row["harsh_accel_share_cav"] = _mean(numbers(ok, "harsh_accel_share_cav")) if pct else \
             math.nan
         row["safety_per_cav_km"] = (float(np.nansum(activations) / np.nansum(cav_km))
                                     if pct > 0 and np.nansum(cav_km) > 0 else math.nan)

@@ -62,6 +62,7 @@ import pandas as pd
 
 from cosim.errors import ConfigError
 from experiments import check_cli
+from experiments.check_cli import arm_of, numbers
 from experiments.lanefree_checks import _markdown
 
 SEEDS = (101, 102, 103)
@@ -165,18 +166,8 @@ def plan_data(variants: dict[str, dict], smoke: bool) -> dict:
     }
 
 
-def arm_of(variant: str) -> str:
-    return variant.split("#", 1)[0]
-
-
 def share_of(arm: str) -> int:
     return int(arm.rsplit("/cav", 1)[1])
-
-
-def _num(frame: pd.DataFrame, col: str) -> np.ndarray:
-    if col not in frame:
-        return np.full(len(frame), np.nan)
-    return pd.to_numeric(frame[col], errors="coerce").to_numpy(float)
 
 
 def evaluate(results: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -188,44 +179,38 @@ def evaluate(results: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
         pct = share_of(arm)
         ok = g[g["status"] == "ok"]
         failed = len(ok) < len(g)
-        cav_coll = np.nan_to_num(_num(ok, "collisions_sumo_cav")) + _num(
+        cav_coll = np.nan_to_num(numbers(ok, "collisions_sumo_cav")) + numbers(
             ok, "collisions_geometric_cav")
         crit = []
         if pct > 0:
             crit += [("CAV collisions (SUMO + ours)", cav_coll, 0.0, "events"),
-                     ("CAV steps outside the road", _num(ok, "boundary_vehicle_steps_cav"),
+                     ("CAV steps outside the road", numbers(ok, "boundary_vehicle_steps_cav"),
                       0.0, "CAV-steps")]
         if pct >= 50:
             which = ("CAVs' longest standstill", "max_standstill_cav_s") \
                 if "-obstacle" in arm else ("longest standstill", "max_standstill_s")
-            crit += [(which[0], _num(ok, which[1]), STANDSTILL_MAX_S, "s"),
-                     ("blocked 30 s windows", _num(ok, "blocked_windows"), 0.0, "windows")]
-        for name, vals, limit, unit in crit:
-            good = np.isfinite(vals) & (vals <= limit)
-            worst = float(np.nanmax(vals)) if np.isfinite(vals).any() else math.nan
-            checks.append({"arm": arm, "check": name, "worst_seed": worst,
-                           "criterion": f"<= {limit:g} {unit}", "n_runs": len(ok),
-                           "passed": bool(good.all()) and not failed and len(ok) > 0,
-                           "note": "runs failed" if failed else ""})
-        cav_km = _num(ok, "cav_vehicle_km")
-        edge = _num(ok, "safety_edge_activations")
+            crit += [(which[0], numbers(ok, which[1]), STANDSTILL_MAX_S, "s"),
+                     ("blocked 30 s windows", numbers(ok, "blocked_windows"), 0.0, "windows")]
+        checks += check_cli.check_rows(arm, crit, len(ok), failed)
+        cav_km = numbers(ok, "cav_vehicle_km")
+        edge = numbers(ok, "safety_edge_activations")
         arms.append({
             "arm": arm, "n_runs": len(ok),
-            "flow_vph": np.nanmean(_num(ok, "edie_flow_vph")) if len(ok) else math.nan,
+            "flow_vph": np.nanmean(numbers(ok, "edie_flow_vph")) if len(ok) else math.nan,
             "cav_collisions_max": np.nanmax(cav_coll) if pct > 0 and len(ok) else math.nan,
-            "longest_standstill_s_max": np.nanmax(_num(ok, "max_standstill_s"))
+            "longest_standstill_s_max": np.nanmax(numbers(ok, "max_standstill_s"))
             if len(ok) else math.nan,
-            "longest_standstill_cav_s_max": np.nanmax(_num(ok, "max_standstill_cav_s"))
+            "longest_standstill_cav_s_max": np.nanmax(numbers(ok, "max_standstill_cav_s"))
             if len(ok) and pct > 0 else math.nan,
-            "longest_standstill_hdv_s_max": np.nanmax(_num(ok, "max_standstill_hdv_s"))
+            "longest_standstill_hdv_s_max": np.nanmax(numbers(ok, "max_standstill_hdv_s"))
             if len(ok) and pct < 100 else math.nan,
-            "blocked_windows_max": np.nanmax(_num(ok, "blocked_windows")) if len(ok)
+            "blocked_windows_max": np.nanmax(numbers(ok, "blocked_windows")) if len(ok)
             else math.nan,
             "edge_interventions_per_cav_km": float(np.nansum(edge) / np.nansum(cav_km))
             if pct > 0 and np.nansum(cav_km) > 0 else math.nan,
-            "harsh_accel_share_cav": np.nanmean(_num(ok, "harsh_accel_share_cav"))
+            "harsh_accel_share_cav": np.nanmean(numbers(ok, "harsh_accel_share_cav"))
             if pct > 0 and len(ok) else math.nan,
-            "sublane_m": np.nanmax(_num(ok, "sumo_lateral_resolution_m")) if len(ok)
+            "sublane_m": np.nanmax(numbers(ok, "sumo_lateral_resolution_m")) if len(ok)
             else math.nan,
         })
     return pd.DataFrame(checks), pd.DataFrame(arms)

@@ -186,3 +186,26 @@ def test_cavs_reach_their_exits_on_a_users_network(tmp_path):
         assert r[key] == 0, (key, r[key])
     assert r["trips_main_off"] >= 5 and r["trips_ramp_off"] >= 2
     assert r["trips_main_main"] >= 20
+
+
+def test_corridor_checks_judge_exits_collisions_and_standstills():
+    import pandas as pd
+
+    from experiments.corridor_checks import evaluate
+
+    def run(variant, **cols):
+        base = {"variant": variant, "status": "ok", "collisions_sumo_cav": 0,
+                "collisions_geometric_cav": 0, "boundary_vehicle_steps_cav": 0,
+                "missed_exits_cav": 0, "wrong_exits_cav": 0, "exit_backstop_cav": 0,
+                "max_standstill_s": 5.0, "blocked_windows": 0, "edie_flow_vph": 6000.0}
+        return {**base, **cols}
+
+    rows = [run("corridor/cav100#1"), run("corridor/cav100#2", missed_exits_cav=1),
+            run("corridor/cav40#1", max_standstill_s=90.0),
+            run("corridor/cav70#1", max_standstill_s=31.0), run("corridor/sl2015#1")]
+    checks, arms = evaluate(pd.DataFrame(rows))
+    failed = set(map(tuple, checks[~checks["passed"]][["arm", "check"]].to_numpy()))
+    assert failed == {("corridor/cav100", "CAV exits missed, wrong or by the backstop"),
+                      ("corridor/cav70", "longest standstill")}
+    assert set(checks["arm"]) == {"corridor/cav100", "corridor/cav70", "corridor/cav40"}
+    assert arms.set_index("arm").loc["corridor/cav100", "n_runs"] == 2
