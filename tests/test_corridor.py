@@ -80,10 +80,10 @@ def test_corridor_routes_strips_and_destinations(tmp_path):
     assert net.od_route("ramp", "off")[0] == "ramp" and net.od_route("ramp", "off")[-1] == \
         "offramp"
     assert net.od_route("main", "main") == net.main_route
-    s0, gore, d_r, d_l = net.exit_strip
+    s0, gore, d_r, d_l = net.exit_strips[0]
     assert abs(gore - 1300.0) < 5.0 and 200.0 < gore - s0 <= 250.0
     assert abs(d_l - (-5.1)) < 1e-6 and abs(d_r - (-8.1)) < 1e-6
-    e0, e1, *_ = net.entry_strip
+    e0, e1, *_ = net.entry_strips[0]
     assert abs(e0 - 300.0) < 5.0 and abs(e1 - 550.0) < 5.0
     plan = plan_vehicles(net, sc.demand, 7, 3600.0)
     main = [v for v in plan.vehicles if v.vid.split(".")[1] == "main"]

@@ -100,3 +100,25 @@ def test_a_cav_staying_on_the_road_leaves_the_strip_and_one_leaving_keeps_it():
     leave = _lateral_after(LaneFreeLaw(LaneFreeParams()), _Drive(-6.6, 2300.0, 1), steps=80)
     assert stay[-1] > -5.1 + 0.9  # out of the strip: it leads off the road
     assert np.all(np.abs(leave + 6.6) < 0.6)  # in the strip, near its middle
+
+
+def test_a_cav_bound_for_a_later_exit_does_not_drive_on_an_earlier_exits_strip():
+    """Two exits on the right (strips 1 200-1 500 m and 2 160-2 500 m): the road of a CAV
+    bound for the second has no first strip, and its funnel closes on the second."""
+    from controllers.road.lanefree.purpose import RoutePurpose
+
+    road = RoadProfile(np.array([0.0, 1200.0, 1500.0, 2160.0, 2500.0]),
+                       np.array([-5.1, -8.1, -5.1, -8.1, -5.1]), np.full(5, 5.1), 3500.0)
+    exits = np.array([[1200.0, 1500.0, -8.1, -5.1], EXIT])
+    q = np.array([[1300.0, -4.0], [1300.0, -4.0], [2300.0, -4.0]])
+    obs = Observation(q=q, p=np.tile([28.0, 0.0], (3, 1)), dt=0.1,
+                      ids=np.array(["a", "b", "c"], dtype=object), length=np.full(3, 4.5),
+                      width=np.full(3, 1.8), desired_speed=np.full(3, 30.0), road=road,
+                      road_edges=road.narrowest(q[:, 0], 60.0), exits=exits,
+                      exit_index=np.array([1, 2, 2]))
+    roads = {k: r for k, _, r, _ in RoutePurpose(LaneFreeParams()).roads(obs)}
+    first, second = roads[1].edges(np.array([1300.0, 2300.0])), roads[2].edges(
+        np.array([1300.0, 2300.0, 2480.0]))
+    assert first[0, 0] == pytest.approx(-8.1)  # its own strip is its road
+    assert second[0, 0] == pytest.approx(-5.1)  # the first exit's strip is not
+    assert second[1, 0] == pytest.approx(-8.1) and second[2, 1] == pytest.approx(-5.1)

@@ -280,7 +280,7 @@ def test_refuses_a_ramp_at_right_angles(tmp_path):
                    check=True, capture_output=True)
     with pytest.raises(NetworkError, match="side_0.*degrees"):
         load_road_network(tmp_path / "t.net.xml", kind="file", main_route=("up", "down"),
-                          ramp_route=("side", "down"))
+                          ramp_routes=[("side", "down")])
     # the same network without the ramp is fine
     net = load_road_network(tmp_path / "t.net.xml", kind="file", main_route=("up", "down"))
     assert net.length_m > 390.0

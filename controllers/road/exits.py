@@ -31,6 +31,14 @@ from controllers.observation import RoadProfile
 
 #: Piece length of the funnel's staircase, m.
 FUNNEL_STEP_M = 10.0
+#: Room (m) the funnel leaves beside the strip's border where the strip starts (and less
+#: in proportion on to the commit point): a vehicle that waited at the road's edge for the
+#: strip fits between that edge and the funnel's bound there and moves onto the strip as
+#: the bound closes. A lane's width: the widest vehicle with margins each side.
+FUNNEL_ROOM_M = 3.0
+#: The commit point lies at most this share of the strip's length before the gore (a strip
+#: shorter than ``commit_m`` / this share commits earlier than ``commit_m``).
+COMMIT_SHARE_MAX = 0.4
 
 
 def _pieces(road: RoadProfile, extra: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -75,10 +83,15 @@ def exit_funnel(road: RoadProfile, exit_row: np.ndarray, prepare_m: float, commi
     edge (for a strip on the right; mirrored on the left) at most ``slope`` (m across per m
     along) times the distance to the commit point beyond the strip's border, from
     ``prepare_m`` (m) before the gore on, and never narrower than the strip's width: the
-    strip alone from ``commit_m`` (m) before the gore on. Measured from the strip's border,
+    strip alone from ``commit_m`` (m) before the gore on (at most
+    :data:`COMMIT_SHARE_MAX` of the strip's length). Measured from the strip's border,
     not from the road's edge, the bound moves steadily across the strip's start (where
-    the road's edge jumps outwards by the strip's width)."""
+    the road's edge jumps outwards by the strip's width), and leaves at least
+    :data:`FUNNEL_ROOM_M` beside the border there (on a short strip the bound closes
+    more steeply than ``slope``)."""
     s_start, s_gore, d_right, d_left = (float(x) for x in exit_row)
+    strip_m = s_gore - s_start
+    commit_m = min(commit_m, COMMIT_SHARE_MAX * strip_m)
     base = exit_road(road, exit_row)
     n = int(np.ceil(prepare_m / FUNNEL_STEP_M))
     grid = s_gore - prepare_m + FUNNEL_STEP_M * np.arange(n)
@@ -88,7 +101,10 @@ def exit_funnel(road: RoadProfile, exit_row: np.ndarray, prepare_m: float, commi
     # each piece holds the bound at its far end (the narrowest it must hold)
     x_end = np.maximum(np.append(s_gore - s0[1:], 0.0), 0.0)
     on = (x <= prepare_m + 1e-9) & (x > 0)
-    reach = np.maximum(x_end - commit_m, 0.0) * slope
+    before_commit = np.maximum(x_end - commit_m, 0.0)
+    room = np.minimum(FUNNEL_ROOM_M * before_commit / max(strip_m - commit_m, 1e-9),
+                      FUNNEL_ROOM_M)
+    reach = np.maximum(before_commit * slope, room)
     if d_left <= 1e-9:  # a strip on the right: bound the left edge
         bound = np.maximum(d_left + reach, right + band)
         left[on] = np.minimum(left[on], bound[on])

@@ -10,6 +10,9 @@ from pathlib import Path
 from cosim.config.overrides import parse_assignments
 from cosim.errors import ConfigError
 
+#: Where :data:`SUMMARY_KEYS` lists the travel times of every origin -> destination pair.
+TRAVEL_TIMES = "travel_time_<origin>_<destination>_s"
+
 #: (summary key, label, unit, format) of the console summary, in order.
 SUMMARY_KEYS = [
     ("edie_flow_vph", "flow (Edie, zone)", "veh/h", "{:.0f}"),
@@ -36,10 +39,7 @@ SUMMARY_KEYS = [
     ("safety_edge_activations", "safety: edge clips", "CAV-steps", "{:.0f}"),
     ("missed_exits_cav", "missed exits (CAVs)", "veh", "{:.0f}"),
     ("missed_exits_hdv", "missed exits (HDVs)", "veh", "{:.0f}"),
-    ("travel_time_main_main_s", "travel time main -> main", "s", "{:.1f}"),
-    ("travel_time_main_off_s", "travel time main -> off-ramp", "s", "{:.1f}"),
-    ("travel_time_ramp_main_s", "travel time on-ramp -> main", "s", "{:.1f}"),
-    ("travel_time_ramp_off_s", "travel time on-ramp -> off-ramp", "s", "{:.1f}"),
+    (TRAVEL_TIMES, "travel time", "s", "{:.1f}"),
     ("teleports", "teleports", "veh", "{:.0f}"),
     ("wall_time_s", "wall time", "s", "{:.1f}"),
 ]
@@ -53,17 +53,28 @@ MISSING = {
     "median_time_headway_s": "no moving follower",
     "min_ttc_s": "nobody closing in",
     "space_mean_speed_mps": "zone empty",
-    "travel_time_main_main_s": "no trip arrived",
-    "travel_time_main_off_s": "no trip arrived",
-    "travel_time_ramp_main_s": "no trip arrived",
-    "travel_time_ramp_off_s": "no trip arrived",
 }
+
+
+def _expanded(row: dict) -> list[tuple[str, str, str, str]]:
+    """:data:`SUMMARY_KEYS` with the travel-time entry expanded into one line per
+    origin -> destination pair in ``row`` (``travel_time_<origin>_<destination>_s``)."""
+    out = []
+    for key, label, unit, fmt in SUMMARY_KEYS:
+        if key != TRAVEL_TIMES:
+            out.append((key, label, unit, fmt))
+            continue
+        for k in row:
+            if k.startswith("travel_time_") and k.endswith("_s") and k.count("_") == 4:
+                o, d = k[len("travel_time_"):-2].split("_")
+                out.append((k, f"{label} {o} -> {d}", unit, fmt))
+    return out
 
 
 def format_summary(row: dict) -> str:
     """The run summary as an aligned table; a missing figure says why."""
     lines = []
-    for key, label, unit, fmt in SUMMARY_KEYS:
+    for key, label, unit, fmt in _expanded(row):
         if key not in row:
             continue
         val = row[key]
@@ -71,7 +82,8 @@ def format_summary(row: dict) -> str:
             if isinstance(val, float) and val == math.inf:
                 lines.append(f"  {label:<38} {'none':>10}   ({MISSING.get(key, 'never seen')})")
             else:
-                lines.append(f"  {label:<38} {'n/a':>10}   ({MISSING.get(key, 'not measured')})")
+                why = "no trip arrived" if key.startswith("travel_time_") else "not measured"
+                lines.append(f"  {label:<38} {'n/a':>10}   ({MISSING.get(key, why)})")
             continue
         if unit == "s" and isinstance(val, int | float) and val > 1e4:
             lines.append(f"  {label:<38} {'> 10 000':>10} {unit}")

@@ -120,8 +120,8 @@ def _check_size(sc: Scenario) -> None:
         what = (f"demand.ring_density_vpkm = {demand.ring_density_vpkm:g} veh/km on "
                 f"{net.circumference_m:g} m")
     else:
-        ramp = demand.total_vph("ramp") if net.kind in ("onramp", "file", "corridor") else 0.0
-        total = demand.total_vph("main") + ramp
+        ramps = net.kind in ("onramp", "file", "corridor")  # every origin's flow
+        total = demand.total_vph() if ramps else demand.total_vph("main")
         planned = total * run.duration_s / 3600.0
         what = f"a demand of {total:g} veh/h for {run.duration_s:g} s"
     if planned > MAX_PLANNED_VEHICLES:

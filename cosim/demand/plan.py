@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cosim.demand.od_names import origin_number
 from cosim.demand.spec import (
     CAV_PREFIX,
     CAV_TAU_S,
@@ -61,7 +62,7 @@ class _Vehicle:
     lat_m: float | None = None  # lateral centre at departure, m (None: lane centre)
     centre_s_m: float | None = None  # ring: centre position at t = 0, m (None: road start)
     v0_mps: float | None = None  # departure speed, m/s (None: the desired speed)
-    destination: str = "main"  # "main" (the road's end) or "off" (the off-ramp)
+    destination: str = "main"  # "main" (the road's end) or an off-ramp ("off", "off2"...)
 
 
 #: Exponential headways are drawn in chunks of this many (any horizon draws the same
@@ -124,7 +125,7 @@ def _kinds_exact(n: int, share: float, rng: np.random.Generator) -> np.ndarray:
 def _streams(seed: int, origin: str) -> dict[str, np.random.Generator]:
     """One generator per quantity of an origin's stream (``SeedSequence([seed, o, q])``):
     every quantity is prefix-stable on its own, whatever the number of vehicles."""
-    o = {"main": 0, "ramp": 1}[origin]
+    o = origin_number(origin)  # main 0, ramp 1, ramp2 2, ...
     return {name: np.random.default_rng(np.random.SeedSequence([seed, o, q]))
             for q, name in enumerate(_STREAMS)}
 
@@ -178,7 +179,7 @@ def _open_stream(
     is_cav, cls, speed = _draw_common(n, demand, g["kinds"], g)
     widths = np.array([demand.size_classes[c][1] for c in cls])
     lat = _lateral(road_width, widths, demand.depart_lateral, g["lateral"])
-    if origin == "ramp":  # at the ramp's right side: it joins the road on the right
+    if origin != "main":  # at the ramp's right side: it joins the road on the right
         lat = -(0.5 * road_width - 0.5 * widths - DEPART_EDGE_MARGIN_M) + g[
             "ramp_lateral"].uniform(0.0, 0.4, size=n)
     lanes = (_depart_lanes(net, n, demand.depart_lateral, g["lanes"]) if origin == "main"
@@ -516,12 +517,12 @@ def plan_vehicles(net: RoadNetwork, demand: DemandSpec, seed: int, horizon_s: fl
             od_route(origin, dest)
         elif q > 0 and (origin, dest) != ("main", "main"):
             raise ConfigError(f"demand.od_vph: {origin!r} -> {dest!r} needs a SUMO network "
-                              f"with {'an on-ramp' if origin == 'ramp' else 'an off-ramp'}")
+                              f"with {'an on-ramp' if origin != 'main' else 'an off-ramp'}")
     vehicles = _open_stream(net, demand, seed, "main", flows.get("main", {}),
                             float(net.width_at(0)), horizon_s)
-    if net.ramp_route and sum(flows.get("ramp", {}).values()) > 0:
-        ramp_w = net.ramp_width_m or net.width_m
-        vehicles += _open_stream(net, demand, seed, "ramp", flows["ramp"], ramp_w,
-                                 horizon_s)
+    for ramp in getattr(net, "ramps", ()):
+        if sum(flows.get(ramp.name, {}).values()) > 0:
+            vehicles += _open_stream(net, demand, seed, ramp.name, flows[ramp.name],
+                                     ramp.width_m or net.width_m, horizon_s)
     vehicles.sort(key=lambda v: (v.depart, v.vid))
     return DemandPlan(vehicles, demand.arrivals)

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cosim.demand.od_names import destination_number, origin_number
 from cosim.errors import ConfigError
 
 CAV_PREFIX = "cav"
@@ -157,9 +158,9 @@ DEPART_SPEED = ("desired", "max")
 RING_PLACEMENT = ("even", "random")
 
 
-#: Origins and destinations of an OD matrix (``demand.od_vph``).
-OD_ORIGINS = ("main", "ramp")
-OD_DESTINATIONS = ("main", "off")
+#: Origins and destinations of an OD matrix (``demand.od_vph``), as named in errors.
+OD_ORIGINS = ("main", "ramp", "ramp2", "...")
+OD_DESTINATIONS = ("main", "off", "off2", "...")
 
 
 @dataclass(frozen=True)
@@ -197,11 +198,12 @@ class DemandSpec:
         slot_headway_s: minimum time between two departures in one slot, s.
         slot_spacing_m: lateral distance between slot centres, m.
         od_vph: an origin-destination matrix, ``(origin, destination, flow veh/h)`` rows,
-            for open roads: origins ``"main"`` (the road's start) and ``"ramp"`` (an
-            on-ramp), destinations ``"main"`` (the road's end) and ``"off"`` (an
-            off-ramp); ``cav_share`` applies to every row. Given, it replaces
-            ``inflow_vph`` (the rows from ``"main"``) and ``ramp_inflow_vph`` (from
-            ``"ramp"``): each origin's arrivals are one stream of its rows' total flow,
+            for open roads: origins ``"main"`` (the road's start) and ``"ramp"``,
+            ``"ramp2"``, ... (the on-ramps), destinations ``"main"`` (the road's end) and
+            ``"off"``, ``"off2"``, ... (the off-ramps; :mod:`cosim.demand.od_names`);
+            ``cav_share`` applies to every row. Given, it replaces ``inflow_vph`` (the
+            rows from ``"main"``) and ``ramp_inflow_vph`` (from ``"ramp"``): each
+            origin's arrivals are one stream of its rows' total flow,
             each vehicle drawn a destination in proportion to its origin's rows.
     """
 
@@ -259,7 +261,7 @@ class DemandSpec:
                 raise ConfigError(f"demand.od_vph[{i}] must be (origin, destination, veh/h) "
                                   f"(got {row!r})")
             o, d, q = row
-            if o not in OD_ORIGINS or d not in OD_DESTINATIONS:
+            if origin_number(o) is None or destination_number(d) is None:
                 raise ConfigError(
                     f"demand.od_vph[{i}]: origin must be one of {', '.join(OD_ORIGINS)} and "
                     f"destination one of {', '.join(OD_DESTINATIONS)} (got {o!r} -> {d!r})")
@@ -269,8 +271,8 @@ class DemandSpec:
             seen.add((o, d))
 
     def total_vph(self, origin: str | None = None) -> float:
-        """Planned flow (veh/h) from ``origin`` (``"main"``, ``"ramp"``), or from every
-        origin (None)."""
+        """Planned flow (veh/h) from ``origin`` (``"main"``, ``"ramp"``, ``"ramp2"``...), or
+        from every origin (None)."""
         flows = self.origin_flows()
         keys = flows if origin is None else [origin]
         return float(sum(sum(flows.get(k, {}).values()) for k in keys))

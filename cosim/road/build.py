@@ -369,8 +369,8 @@ def build_network(spec: NetworkSpec, cache_dir: Path | str | None = None) -> Roa
         target / NET_FILE_NAME,
         kind=spec.kind,
         main_route=sources.main_route,
-        ramp_route=sources.ramp_route,
-        offramp_route=sources.offramp_route,
+        ramp_routes=(sources.ramp_route,) if sources.ramp_route else (),
+        offramp_routes=(sources.offramp_route,) if sources.offramp_route else (),
         periodic=sources.periodic,
         speed_limit_mps=spec.speed_limit_mps,
     )
@@ -425,8 +425,8 @@ def _load_user_network(spec: NetworkSpec) -> RoadNetwork:
         path,
         kind="file",
         main_route=spec.route_edges,
-        ramp_route=spec.ramp_edges or None,
-        offramp_route=spec.offramp_edges or None,
+        ramp_routes=spec.ramp_routes(),
+        offramp_routes=spec.offramp_routes(),
         periodic=False,
         speed_limit_mps=None,
     )

@@ -37,8 +37,9 @@ read.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +47,7 @@ import numpy as np
 
 from controllers.observation import RoadProfile
 from cosim.errors import ConfigError, NetworkError
+from cosim.road import ramps as R
 from cosim.road.frame_reference import lane_frame_reference, lateral_reference
 from cosim.road.lane_coordinates import lane_coordinates, use_lane_coordinates
 from cosim.road.lane_tables import (
@@ -60,13 +62,12 @@ from cosim.road.lane_tables import (
     wrap,
 )
 from cosim.road.profile import road_profile
+from cosim.road.ramps import OffRamp, OnRamp
 from cosim.road.reference_line import reference_line
 from cosim.road.sumo_net import (
-    connections,
     lanes_of,
     read_sumo_net,
     reference_lane,
-    via_chain,
 )
 
 
@@ -79,19 +80,12 @@ class RoadNetwork:
         kind: the spec's kind.
         main_route: edge ids of the main route in driving order; ``s`` is
             continuous along them (and across the junction lanes between them).
-        ramp_route: edge ids of the on-ramp route (ramp edge(s) then the main
-            road's edge after the merge), or None.
         length_m: length of the main route as SUMO measures it (its lanes plus the
             junction lanes between them), m; on the ring the circumference (``s`` wraps
             there).
         width_m: widest width of the main road (right to left edge), m.
         periodic: True on the ring: ``s`` wraps at ``length_m``.
         speed_limit_mps: speed limit on the main route.
-        merge_s_m: onramp: ``s`` where the main road's lane leaves the merge
-            junction (ramp traffic is on the main lane from here on), else None.
-        ramp_length_m: onramp: SUMO's length of the ramp route up to the main road
-            (ramp lanes plus their junction lanes; along the ramp, not along ``s``), m.
-        ramp_width_m: onramp: width of the ramp's first edge, else None.
         n_lanes: number of lanes on the main route's first edge (1 when lane-free).
         lane_offsets: ``s`` (m) of position 0 of every lane and edge on the main and
             ramp routes, internal junction lanes included (ramp lanes upstream of the
@@ -102,6 +96,10 @@ class RoadNetwork:
         lane_width: width (m) of each route lane.
         segment_s0, segment_width: the profile's pieces: start ``s`` (m) and width (m).
         edge_spans: ``(edge, s_start, s_end)`` of every main-route edge's lanes, m.
+        ramps, offramps: the on-ramps (:class:`~cosim.road.ramps.OnRamp`: route, merge
+            point, entry strip) and off-ramps (:class:`~cosim.road.ramps.OffRamp`: route,
+            diverge edge, exit strip), in the order given; ``ramp_route``,
+            ``merge_s_m``, ``ramp_length_m`` and ``ramp_width_m`` are the first on-ramp's.
 
     The ring keeps vehicles circling through routes with a ``repeat``
     attribute: :meth:`ring_route_edges` gives the loop starting on a given
@@ -112,14 +110,10 @@ class RoadNetwork:
     net_file: Path
     kind: str
     main_route: tuple[str, ...]
-    ramp_route: tuple[str, ...] | None
     length_m: float
     width_m: float
     periodic: bool
     speed_limit_mps: float
-    merge_s_m: float | None = None
-    ramp_length_m: float | None = None
-    ramp_width_m: float | None = None
     n_lanes: int = 1
     lane_offsets: Mapping[str, float] = field(default_factory=dict, repr=False, compare=False)
     lane_d: Mapping[str, float] = field(default_factory=dict, repr=False, compare=False)
@@ -135,20 +129,45 @@ class RoadNetwork:
     #: lanes (junction lanes included) and edges of the main route: a vehicle on one of
     #: them is on the main road; a ramp's lanes and its junction lanes are not
     main_lanes: frozenset = field(default=frozenset(), repr=False, compare=False)
-    #: an off-ramp: its edges (the first leaves a main-route edge), or None
-    offramp_route: tuple[str, ...] | None = None
-    #: the main-route edge the off-ramp leaves, and its lanes that lead onto the off-ramp
-    diverge_edge: str | None = None
-    exit_lanes: tuple[str, ...] = ()
-    #: the exit lanes' extent ``(s_start, s_gore, d_right, d_left)`` (m): ``s`` where they
-    #: start and where they end (the gore: the off-ramp leaves there), their right and
-    #: left border
-    exit_strip: tuple[float, float, float, float] | None = None
-    #: the on-ramp's lanes on the main route (an acceleration strip beside the road) and
-    #: their extent ``(s_start, s_end, d_right, d_left)`` (m); None when the ramp joins
-    #: the road's own lane(s)
-    entry_lanes: tuple[str, ...] = ()
-    entry_strip: tuple[float, float, float, float] | None = None
+    #: the on-ramps and off-ramps (:mod:`cosim.road.ramps`), in the order given
+    ramps: tuple[OnRamp, ...] = ()
+    offramps: tuple[OffRamp, ...] = ()
+
+    # ---- the first on-ramp (the onramp and corridor kinds have one) --------------------
+
+    @property
+    def ramp_route(self) -> tuple[str, ...] | None:
+        """The first on-ramp's route, or None."""
+        return self.ramps[0].route if self.ramps else None
+
+    @property
+    def merge_s_m(self) -> float | None:
+        """The first on-ramp's :attr:`OnRamp.merge_s_m` (m), or None."""
+        return self.ramps[0].merge_s_m if self.ramps else None
+
+    @property
+    def ramp_length_m(self) -> float | None:
+        """The first on-ramp's :attr:`OnRamp.length_m` (m), or None."""
+        return self.ramps[0].length_m if self.ramps else None
+
+    @property
+    def ramp_width_m(self) -> float | None:
+        """The first on-ramp's width (m), or None."""
+        return self.ramps[0].width_m if self.ramps else None
+
+    @property
+    def exit_strips(self) -> np.ndarray | None:
+        """(K, 4) the off-ramps' exit strips ``(s_start, s_gore, d_right, d_left)`` (m), in
+        the order of :attr:`offramps`; None without one."""
+        return (np.array([o.exit_strip for o in self.offramps], dtype=float)
+                if self.offramps else None)
+
+    @property
+    def entry_strips(self) -> np.ndarray | None:
+        """(J, 4) the on-ramps' acceleration strips ``(s_start, s_end, d_right, d_left)``
+        (m); None when no on-ramp joins beside the road."""
+        rows = [r.entry_strip for r in self.ramps if r.entry_strip is not None]
+        return np.array(rows, dtype=float) if rows else None
 
     @property
     def lane_based(self) -> bool:
@@ -160,47 +179,51 @@ class RoadNetwork:
     # ---- origins, destinations and their routes -----------------------------------------
 
     @property
-    def join_index(self) -> int:
-        """Index in :attr:`ramp_route` of its first main-route edge (where it joins)."""
-        return next(i for i, e in enumerate(self.ramp_route) if e in self.main_route)
-
-    @property
     def origins(self) -> tuple[str, ...]:
-        """Where traffic enters an open road: ``"main"`` (the main route's start) and, with
-        an on-ramp, ``"ramp"``."""
+        """Where traffic enters an open road: ``"main"`` (the main route's start) and its
+        on-ramps (``"ramp"``, ``"ramp2"``, ...)."""
         if self.periodic:
             return ()
-        return ("main", "ramp") if self.ramp_route else ("main",)
+        return ("main", *(r.name for r in self.ramps))
 
     @property
     def destinations(self) -> tuple[str, ...]:
-        """Where traffic leaves: ``"main"`` (the main route's end) and, with an off-ramp,
-        ``"off"`` (the off-ramp's end)."""
+        """Where traffic leaves: ``"main"`` (the main route's end) and its off-ramps'
+        ends (``"off"``, ``"off2"``, ...)."""
         if self.periodic:
             return ()
-        return ("main", "off") if self.offramp_route else ("main",)
+        return ("main", *(o.name for o in self.offramps))
+
+    def exit_number(self, destination: str) -> int:
+        """0 for ``"main"`` (the road's end), k >= 1 for the k-th off-ramp's name (the
+        observation's ``exit_index``)."""
+        if destination == "main":
+            return 0
+        return 1 + [o.name for o in self.offramps].index(destination)
 
     def od_route(self, origin: str, destination: str) -> tuple[str, ...]:
         """SUMO's edges from ``origin`` to ``destination`` (:attr:`origins`,
-        :attr:`destinations`): the ramp's edges join the main route where the ramp route
-        ends; the off-ramp's leave it at :attr:`diverge_edge`. Raises ConfigError for a
-        pair the network does not connect (an off-ramp before the on-ramp)."""
+        :attr:`destinations`): an on-ramp's edges join the main route where its route
+        ends; an off-ramp's leave it at its diverge edge. Raises ConfigError for a pair the
+        network does not connect (an off-ramp before the on-ramp)."""
         if origin not in self.origins or destination not in self.destinations:
             raise ConfigError(f"no route from {origin!r} to {destination!r} on this network "
                               f"(origins {', '.join(self.origins)}; destinations "
                               f"{', '.join(self.destinations)})")
         main = self.main_route
-        if origin == "ramp":
-            i = self.join_index
-            edges, first = list(self.ramp_route[:i]), main.index(self.ramp_route[i])
-        else:
-            edges, first = [], 0
-        if destination == "off":
-            leave = main.index(self.diverge_edge)
+        edges: list[str] = []
+        first = 0
+        if origin != "main":
+            ramp = self.ramps[self.origins.index(origin) - 1]
+            i = ramp.join_index
+            edges, first = list(ramp.route[:i]), main.index(ramp.route[i])
+        if destination != "main":
+            off = self.offramps[self.exit_number(destination) - 1]
+            leave = main.index(off.diverge_edge)
             if leave < first:
-                raise ConfigError(f"no route from {origin!r} to 'off': the off-ramp leaves "
-                                  f"the road before the on-ramp joins it")
-            return (*edges, *main[first:leave + 1], *self.offramp_route)
+                raise ConfigError(f"no route from {origin!r} to {destination!r}: the "
+                                  f"off-ramp leaves the road before the on-ramp joins it")
+            return (*edges, *main[first:leave + 1], *off.route)
         return (*edges, *main[first:])
 
     # ---- vehicles: SUMO (lane, position, lateral position) <-> road frame (s, d) --------
@@ -386,12 +409,14 @@ def load_road_network(
     *,
     kind: str,
     main_route: Sequence[str],
-    ramp_route: Sequence[str] | None = None,
+    ramp_routes: Sequence[Sequence[str]] = (),
     periodic: bool = False,
     speed_limit_mps: float | None = None,
-    offramp_route: Sequence[str] | None = None,
+    offramp_routes: Sequence[Sequence[str]] = (),
 ) -> RoadNetwork:
-    """Read a ``.net.xml`` with sumolib and compute the road frame of ``main_route``.
+    """Read a ``.net.xml`` with sumolib and compute the road frame of ``main_route``, with
+    its on-ramps ``ramp_routes`` (each ramp edge(s) then the main-route edge it joins) and
+    off-ramps ``offramp_routes`` (each leaves a main-route edge with its first edge).
 
     Raises:
         NetworkError: an unreadable file, a route edge missing or without lanes, route
@@ -400,13 +425,8 @@ def load_road_network(
     path = Path(net_file)
     net = read_sumo_net(path)
     try:
-        road = _road_network(path, net, kind, main_route, ramp_route, periodic,
-                             speed_limit_mps, offramp_route)
-        if offramp_route:
-            road = _with_offramp(road, net, tuple(offramp_route))
-        if ramp_route and road.join_index > 0:
-            road = _with_entry_strip(road, net)
-        return road
+        return _road_network(path, net, kind, main_route, [tuple(r) for r in ramp_routes],
+                             periodic, speed_limit_mps, [tuple(r) for r in offramp_routes])
     except (TypeError, ValueError, IndexError, KeyError, ZeroDivisionError) as exc:
         # geometry sumolib or the frame cannot handle (missing shapes, positions...)
         msg = str(exc).splitlines()[0] if str(exc) else ""
@@ -415,11 +435,11 @@ def load_road_network(
 
 
 def _road_network(path: Path, net: Any, kind: str, main_route: Sequence[str],
-                  ramp_route: Sequence[str] | None, periodic: bool,
+                  ramp_routes: list[tuple[str, ...]], periodic: bool,
                   speed_limit_mps: float | None,
-                  offramp_route: Sequence[str] | None = None) -> RoadNetwork:
+                  offramp_routes: list[tuple[str, ...]]) -> RoadNetwork:
     """The body of :func:`load_road_network` (errors of unexpected geometry wrapped there)."""
-    for eid in (*main_route, *(ramp_route or ())):
+    for eid in main_route:
         if not net.hasEdge(eid):
             raise NetworkError(f"edge {eid!r} of the route is not in network {path.name}")
         if net.getEdge(eid).getFunction() == "internal":
@@ -427,25 +447,27 @@ def _road_network(path: Path, net: Any, kind: str, main_route: Sequence[str],
     if len(set(main_route)) != len(main_route):
         raise NetworkError(f"the main route lists an edge twice: {list(main_route)}")
     lanes = route_lanes(net, main_route, periodic, True, "route")
-    if ramp_route:
-        if ramp_route[-1] not in main_route:
-            raise NetworkError(
-                f"ramp route must end on a main-route edge (ends on {ramp_route[-1]!r})"
-            )
-        known = {g.lane_id for g in lanes}
-        lanes += [g for g in route_lanes(net, ramp_route, False, False, "ramp")
+    known = {g.lane_id for g in lanes}
+    for ramp in ramp_routes:
+        R.check_ramp_edges(net, path, ramp, "ramp")
+        R.join_index(ramp, main_route, path)
+        lanes += [g for g in route_lanes(net, ramp, False, False, "ramp")
                   if g.lane_id not in known]
-    off_edges: tuple[str, ...] = ()
-    if offramp_route:  # its lanes (and the junction lanes onto it) in the frame: a
-        # vehicle on them is seen where SUMO draws it, projected onto the reference line
-        diverge = _diverge_edge(net, main_route, offramp_route, path)
-        known = {g.lane_id for g in lanes}
-        off_edges = tuple(offramp_route)
-        lanes += [g for g in route_lanes(net, (diverge, *offramp_route), False, False,
-                                         "off-ramp") if g.lane_id not in known]
+        known |= {g.lane_id for g in lanes}
+    diverges: set[str] = set()
+    for off in offramp_routes:  # its lanes (and the junction lanes onto it) in the frame:
+        # a vehicle on them is seen where SUMO draws it, projected onto the reference line
+        diverge = R.diverge_edge(net, main_route, off, path)
+        if diverge in diverges:
+            raise NetworkError(f"two off-ramps leave main-route edge {diverge!r}: give "
+                               f"each off-ramp its own diverge edge")
+        diverges.add(diverge)
+        lanes += [g for g in route_lanes(net, (diverge, *off), False, False, "off-ramp")
+                  if g.lane_id not in known]
+        known |= {g.lane_id for g in lanes}
     line = reference_line(net, main_route, periodic)
     index = {g.lane_id: k for k, g in enumerate(lanes)}
-    for eid in (*main_route, *(ramp_route or ()), *off_edges):
+    for eid in (*main_route, *(e for r in (*ramp_routes, *offramp_routes) for e in r)):
         index.setdefault(eid, index[reference_lane(net.getEdge(eid)).getID()])
     tb = build_tables(lanes, line, index)
     measure, chain_off = build_measure(tb, net, main_route, periodic)
@@ -468,16 +490,6 @@ def _road_network(path: Path, net: Any, kind: str, main_route: Sequence[str],
     if periodic:  # the first edge starts at s = 0 (its lanes may start a little after)
         offsets = {x: (v if v < length - 1e-9 else 0.0) for x, v in offsets.items()}
 
-    merge_s = ramp_len = ramp_width = None
-    if ramp_route:
-        merge_s = offsets[ramp_route[-1]]
-        ramp_len = 0.0
-        for k in range(len(ramp_route) - 1):
-            edge = net.getEdge(ramp_route[k])
-            conn = connections(edge, ramp_route[k + 1])[0]
-            ramp_len += conn.getFromLane().getLength()
-            ramp_len += sum(ln.getLength() for ln in via_chain(net, conn, ramp_route[k + 1]))
-        ramp_width = float(sum(ln.getWidth() for ln in lanes_of(net.getEdge(ramp_route[0]))))
     if speed_limit_mps is None:
         speed_limit_mps = float(reference_lane(net.getEdge(main_route[0])).getSpeed())
     if not speed_limit_mps > 0:
@@ -486,18 +498,14 @@ def _road_network(path: Path, net: Any, kind: str, main_route: Sequence[str],
             f"(got {speed_limit_mps})"
         )
     widths = left - right
-    return RoadNetwork(
+    road = RoadNetwork(
         net_file=path.resolve(),
         kind=kind,
         main_route=tuple(main_route),
-        ramp_route=tuple(ramp_route) if ramp_route else None,
         length_m=float(length),
         width_m=float(widths.max()),
         periodic=periodic,
         speed_limit_mps=float(speed_limit_mps),
-        merge_s_m=merge_s,
-        ramp_length_m=ramp_len,
-        ramp_width_m=ramp_width,
         n_lanes=len(lanes_of(net.getEdge(main_route[0]))),
         lane_offsets=offsets,
         lane_d=lane_d,
@@ -510,57 +518,11 @@ def _road_network(path: Path, net: Any, kind: str, main_route: Sequence[str],
         tables=tb,
         main_lanes=frozenset([g.lane_id for g in lanes if g.main] + list(main_route)),
     )
-
-
-def _strip(road: RoadNetwork, lanes: list[str]) -> tuple[float, float, float, float]:
-    """``(s_start, s_end, d_right, d_left)`` (m) of route lanes ``lanes`` side by side."""
-    tb = road.tables
-    keys = np.array([tb.index[x] for x in lanes])
-    s_end, _ = frame_of(tb, keys, tb.lane_len[keys], np.zeros(len(keys)))
-    right = min(road.lane_d[x] - 0.5 * road.lane_width[x] for x in lanes)
-    left = max(road.lane_d[x] + 0.5 * road.lane_width[x] for x in lanes)
-    return (float(min(road.lane_offsets[x] for x in lanes)), float(s_end.max()),
-            float(right), float(left))
-
-
-def _with_entry_strip(road: RoadNetwork, net: Any) -> RoadNetwork:
-    """``road`` with its acceleration strip: the lanes of the main-route edge the on-ramp
-    joins that are reached from the ramp, when they are not all of that edge's lanes."""
-    from dataclasses import replace
-
-    i = road.join_index
-    edge = net.getEdge(road.ramp_route[i])
-    reached = sorted({c.getToLane().getID() for c in connections(
-        net.getEdge(road.ramp_route[i - 1]), edge.getID())})
-    if not reached or len(reached) == len(lanes_of(edge)):
-        return road
-    return replace(road, entry_lanes=tuple(reached), entry_strip=_strip(road, reached))
-
-
-def _diverge_edge(net: Any, main_route: Sequence[str], offramp: Sequence[str],
-                  path: Path) -> str:
-    """The main-route edge the off-ramp ``offramp`` leaves (the last one with a lane
-    connected to its first edge); NetworkError for an off-ramp the frame cannot use."""
-    for eid in offramp:
-        if not net.hasEdge(eid):
-            raise NetworkError(f"edge {eid!r} of the off-ramp route is not in network "
-                               f"{path.name}")
-    if offramp[0] in main_route:
-        raise NetworkError(f"the off-ramp route's first edge {offramp[0]!r} is on the main "
-                           f"route: it must leave it")
-    diverge = [e for e in main_route if connections(net.getEdge(e), offramp[0])]
-    if not diverge:
-        raise NetworkError(f"no main-route edge leads onto the off-ramp's first edge "
-                           f"{offramp[0]!r}")
-    return diverge[-1]
-
-
-def _with_offramp(road: RoadNetwork, net: Any, offramp: tuple[str, ...]) -> RoadNetwork:
-    """``road`` with its off-ramp: the main-route edge it leaves (the last one with lanes
-    connected to the off-ramp's first edge), those lanes and their extent in the frame."""
-    from dataclasses import replace
-
-    edge = _diverge_edge(net, road.main_route, offramp, road.net_file)
-    lanes = sorted({c.getFromLane().getID() for c in connections(net.getEdge(edge), offramp[0])})
-    return replace(road, offramp_route=offramp, diverge_edge=edge, exit_lanes=tuple(lanes),
-                   exit_strip=_strip(road, lanes))
+    lane_width = road.lane_width
+    strip_of = functools.partial(R.strip, tb, offsets, lane_d, lane_width)
+    return replace(
+        road,
+        ramps=tuple(R.on_ramp(net, k, r, main_route, path, offsets, strip_of)
+                    for k, r in enumerate(ramp_routes)),
+        offramps=tuple(R.off_ramp(net, k, r, main_route, path, strip_of)
+                       for k, r in enumerate(offramp_routes)))

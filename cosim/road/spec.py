@@ -85,16 +85,18 @@ class NetworkSpec:
             as on 100 m edges (benchmarks/bench_sumo_options.py, 12 000 veh/h).
         net_file: kind ``file``: path to the user's ``.net.xml``.
         route_edges: kind ``file``: edge ids of the main route in driving order.
-        ramp_edges: kind ``file`` (optional): edge ids of a ramp route that ends
-            on a main-route edge.
+        ramp_edges: kind ``file`` (optional): the edge ids of an on-ramp route that
+            ends on a main-route edge, or a list of such routes (several on-ramps, named
+            ``ramp``, ``ramp2``, ... in the demand in this order).
         diverge_position_m: corridor: distance from the main road's start to the gore
             (where the off-ramp leaves the deceleration strip), m.
         deceleration_lane_m: corridor: length of the deceleration strip before the gore, m.
         offramp_length_m: corridor: length of the off-ramp after the gore, m.
         lanes: corridor: 1 (one wide lane, lane-free) or 3 (three conventional lanes of
             ``width_m / 3``).
-        offramp_edges: kind ``file`` (optional): edge ids of an off-ramp route; its first
-            edge leaves a main-route edge (from the lanes of that edge that connect to it).
+        offramp_edges: kind ``file`` (optional): the edge ids of an off-ramp route, its
+            first edge leaving a main-route edge (from the lanes of that edge that connect
+            to it), or a list of such routes (named ``off``, ``off2``, ... in this order).
     """
 
     kind: str = "straight"
@@ -111,20 +113,20 @@ class NetworkSpec:
     max_edge_length_m: float = 100.0
     net_file: str | None = None
     route_edges: tuple[str, ...] = ()
-    ramp_edges: tuple[str, ...] = ()
+    ramp_edges: tuple[str, ...] | tuple[tuple[str, ...], ...] = ()
     diverge_position_m: float = 2500.0
     deceleration_lane_m: float = CORRIDOR_DECELERATION_LANE_M
     offramp_length_m: float = 300.0
     lanes: int = 1
-    offramp_edges: tuple[str, ...] = ()
+    offramp_edges: tuple[str, ...] | tuple[tuple[str, ...], ...] = ()
 
     def __post_init__(self) -> None:
         # Accept lists from TOML/JSON but store hashable tuples.
         profile = tuple(tuple(float(v) for v in seg) for seg in self.width_profile)
         object.__setattr__(self, "width_profile", profile)
         object.__setattr__(self, "route_edges", tuple(str(e) for e in self.route_edges))
-        object.__setattr__(self, "ramp_edges", tuple(str(e) for e in self.ramp_edges))
-        object.__setattr__(self, "offramp_edges", tuple(str(e) for e in self.offramp_edges))
+        for name in ("ramp_edges", "offramp_edges"):
+            object.__setattr__(self, name, _routes_field(name, getattr(self, name)))
         self.validate()
 
     def validate(self) -> None:
@@ -239,6 +241,14 @@ class NetworkSpec:
         if not self.route_edges:
             raise ConfigError("network.route_edges must list the main route's edges")
 
+    def ramp_routes(self) -> tuple[tuple[str, ...], ...]:
+        """The on-ramp routes of ``ramp_edges`` (one route or a list of them)."""
+        return _as_routes(self.ramp_edges)
+
+    def offramp_routes(self) -> tuple[tuple[str, ...], ...]:
+        """The off-ramp routes of ``offramp_edges`` (one route or a list of them)."""
+        return _as_routes(self.offramp_edges)
+
     def joints_m(self) -> tuple[float, ...]:
         """Positions along the road (m) where a built straight road or ring joins two
         edges (empty for other kinds; ring joints are approximate: SUMO's junctions)."""
@@ -271,6 +281,27 @@ class NetworkSpec:
         params = {k: getattr(self, k) for k in keys}
         params.update(kind=self.kind, speed_limit_mps=self.speed_limit_mps)
         return json.loads(json.dumps(params))  # tuples -> lists, stable for hashing
+
+
+def _routes_field(name: str, value) -> tuple:
+    """``value`` as stored: one route (a tuple of edge ids) or a tuple of routes; a
+    ConfigError for a mix of both or an empty route in a list."""
+    items = tuple(value)
+    if all(isinstance(e, str) for e in items):
+        return tuple(str(e) for e in items)
+    if all(isinstance(e, list | tuple) for e in items):
+        routes = tuple(tuple(str(x) for x in r) for r in items)
+        if any(not r for r in routes):
+            raise ConfigError(f"network.{name}: a route in the list has no edge")
+        return routes
+    raise ConfigError(f"network.{name} must be a list of edge ids or a list of such lists "
+                      f"(got {value!r})")
+
+
+def _as_routes(value: tuple) -> tuple[tuple[str, ...], ...]:
+    if not value:
+        return ()
+    return (value,) if isinstance(value[0], str) else value
 
 
 def _positive(name: str, value: float) -> None:

@@ -23,6 +23,7 @@ from controllers import protocol, registry
 from controllers.layers.safety import SafetyConfig, SafetyLayer
 from cosim.config.checks import check_against_network
 from cosim.config.scenario import Scenario
+from cosim.demand.od_names import destination_number, origin_number
 from cosim.errors import ConfigError, CosimError, SumoStartError
 from cosim.metrics import capacity as cap
 from cosim.metrics.jams import JamRecorder
@@ -179,7 +180,7 @@ def build_world(sc: Scenario, work: Path, gui: bool = False):
     action_step = run.cav_action_step_s if routes.n_hdv == 0 else run.step_length_s
     world = SumoWorld(net, args, dt=run.step_length_s, desired=routes.desired_speed_mps,
                       gui=gui, cav_action_step_s=action_step,
-                      destinations=routes.destination if net.offramp_route else None)
+                      destinations=routes.destination if getattr(net, "offramps", ()) else None)
     world.lateral_resolution_m = resolution  # SUMO's sublane width, m (None: lanes)
     return world, net, plan, detectors
 
@@ -206,8 +207,8 @@ def _run_in(sc: Scenario, work: Path, gui: bool, progress, hooks) -> RunResult:
     jams = JamRecorder(run.step_length_s, run.warmup_s, xs, period,
                        sc.outputs.standstill_speed_mps, sc.outputs.long_standstill_s)
     layout = capacity_layout(sc, world.road, net)
-    ramp = sc.demand.total_vph("ramp") if getattr(net, "ramp_route", None) else 0.0
-    demand = 0.0 if net.periodic else sc.demand.total_vph("main") + ramp
+    ramps = sum(sc.demand.total_vph(r.name) for r in getattr(net, "ramps", ()))
+    demand = 0.0 if net.periodic else sc.demand.total_vph("main") + ramps
     caprec = CapacityRecorder(run.step_length_s, layout, run.warmup_s, run.duration_s,
                               demand_vph=demand)
     every = sc.outputs.trajectory_every if sc.outputs.trajectories else 0
@@ -265,7 +266,7 @@ def _run_in(sc: Scenario, work: Path, gui: bool, progress, hooks) -> RunResult:
         summary[f"clip_rate_{name}"] = rate
     for layer in loop.layers:
         summary[f"clip_rate_loop_{layer.name}"] = layer.clip_rate
-    trips = (trip_table(world, plan) if getattr(net, "offramp_route", None) or sc.demand.od_vph
+    trips = (trip_table(world, plan) if getattr(net, "offramps", ()) or sc.demand.od_vph
              else None)
     if trips is not None:
         summary.update(trip_summary(trips, world))
@@ -321,19 +322,21 @@ def _run_in(sc: Scenario, work: Path, gui: bool, progress, hooks) -> RunResult:
 def trip_table(world, plan):
     """One row per planned vehicle of an open road in the SUMO world (None elsewhere):
     ``vehicle``, ``kind`` (cav/hdv), ``origin``, ``destination`` (planned), ``reached``
-    ("main": the road's end, "off": the off-ramp, "": still on the road or never left the
-    entrance), and the times (s) it departed, joined the main road from the on-ramp
+    ("main": the road's end, "off", "off2", ...: an off-ramp, "": still on the road or never
+    left the entrance), and the times (s) it departed, joined the main road from the on-ramp
     (``merge_s``), left it by the off-ramp (``exit_s``) and arrived, and ``travel_time_s``
     (arrival - departure)."""
     import pandas as pd
 
     trips = getattr(world, "trips", None)
+    exits = getattr(world, "exit_taken", {})  # id -> the off-ramp it left by
     if trips is None or not plan.vehicles or plan.vehicles[0].centre_s_m is not None:
         return None
     rows = []
     for v in plan.vehicles:
         dep, merge, exit_t, arr = trips.get(v.vid, [np.nan] * 4)
-        reached = "" if np.isnan(arr) else ("off" if np.isfinite(exit_t) else "main")
+        reached = "" if np.isnan(arr) else (exits.get(v.vid, "main") if np.isfinite(exit_t)
+                                             else "main")
         rows.append((v.vid, "cav" if v.is_cav else "hdv", v.vid.split(".")[1], v.destination,
                      reached, dep, merge, exit_t, arr, arr - dep))
     return pd.DataFrame(rows, columns=["vehicle", "kind", "origin", "destination", "reached",
@@ -343,20 +346,22 @@ def trip_table(world, plan):
 
 def trip_summary(trips, world) -> dict:
     """Summary columns of the trip table: missed and wrong exits by kind (a missed exit:
-    planned for the off-ramp, arrived at the road's end; for CAVs the SUMO world's
-    backstop re-routes a CAV still on the wrong lane at the gore and counts it), and the
+    planned for an off-ramp, arrived elsewhere; a wrong one: left by an off-ramp not its
+    own; for CAVs the SUMO world's backstop re-routes a CAV still on the wrong lane at a
+    gore and counts it), and the
     mean travel time (s) per origin -> destination of the trips that arrived where they
     were going (``travel_time_<origin>_<destination>_s``; NaN: none arrived)."""
     out: dict = {}
     done = trips[trips.reached != ""]
     for kind in ("cav", "hdv"):
         k = done[done.kind == kind]
-        out[f"missed_exits_{kind}"] = int(((k.destination == "off") & (k.reached == "main")).sum())
-        out[f"wrong_exits_{kind}"] = int(((k.destination == "main") & (k.reached == "off")).sum())
-    for o in ("main", "ramp"):
-        for d in ("main", "off"):
+        other = k.destination != k.reached
+        out[f"missed_exits_{kind}"] = int((other & (k.destination != "main")).sum())
+        out[f"wrong_exits_{kind}"] = int((other & (k.reached != "main")).sum())
+    for o in sorted(set(trips.origin), key=origin_number):
+        for d in sorted(set(trips.destination), key=destination_number):
             sel = done[(done.origin == o) & (done.destination == d) & (done.reached == d)]
-            if (trips.origin == o).any() and (trips.destination == d).any():
+            if ((trips.origin == o) & (trips.destination == d)).any():  # a planned pair
                 out[f"travel_time_{o}_{d}_s"] = (float(sel.travel_time_s.mean()) if len(sel)
                                                  else np.nan)
                 out[f"trips_{o}_{d}"] = int(len(sel))

@@ -165,23 +165,28 @@ class SumoWorld:
                  gui: bool = False, cav_action_step_s: float | None = None,
                  destinations: dict | None = None) -> None:
         self.net = net
-        #: destination per vehicle id ("main" or "off"), and the trip log: id -> [depart,
-        #: joined the main road (ramp traffic), left it by the off-ramp, arrived] times, s
+        #: destination per vehicle id ("main" or an off-ramp's name: "off", "off2", ...),
+        #: the off-ramp each vehicle left the road by, and the trip log: id -> [depart,
+        #: joined the main road (ramp traffic), left it by an off-ramp, arrived] times, s
         self.destination = dict(destinations or {})
+        self.exit_taken: dict[str, str] = {}
         self.trips: dict[str, list[float]] = {}
-        #: the road's exit (an off-ramp): (1, 4) rows (s_start, s_gore, d_right, d_left), m
-        self.exits = (np.array([net.exit_strip], dtype=float) if net.exit_strip is not None
-                      else None)
-        #: the on-ramp's acceleration strip: (1, 4) rows (s_start, s_end, d_right, d_left), m
-        self.entries = (np.array([net.entry_strip], dtype=float)
-                        if net.entry_strip is not None else None)
-        #: vehicles that would have missed their exit (sent on to the road's end) or taken
-        #: an exit not theirs (sent down the off-ramp), by kind "cav" / "hdv"
+        #: the road's exits (off-ramps): (K, 4) rows (s_start, s_gore, d_right, d_left), m
+        self.exits = net.exit_strips
+        #: the on-ramps' acceleration strips: (J, 4) rows (s_start, s_end, d_right,
+        #: d_left), m
+        self.entries = net.entry_strips
+        #: vehicles that would have missed their exit (sent on along the road) or taken
+        #: an exit not theirs (sent down that off-ramp), by kind "cav" / "hdv"
         self.missed_exits = {"cav": 0, "hdv": 0}
         self.wrong_exits = {"cav": 0, "hdv": 0}
         #: vehicles put back inside an off-ramp lane they stood across (see _exit_check)
         self.offramp_lateral_fixes = 0
-        self._exit_lanes = frozenset(net.exit_lanes)
+        #: the diverge edge of each off-ramp -> (its index, its exit lanes)
+        self._diverge = {o.diverge_edge: (k, frozenset(o.exit_lanes))
+                         for k, o in enumerate(net.offramps)}
+        #: an off-ramp's edges -> its name (where a vehicle that left the road went)
+        self._offramp_of = {e: o.name for o in net.offramps for e in o.route}
         self._teleports = 0  # vehicles SUMO teleported so far (summed over the steps)
         self.dt = float(dt)
         self.cav_action_step_s = max(float(cav_action_step_s or dt), self.dt)
@@ -290,14 +295,14 @@ class SumoWorld:
         for vid in self.departed_now:
             self.trips[vid] = [t, np.nan, np.nan, np.nan]
             veh.subscribe(vid, _vars())
-            if ".ramp." in vid:  # keeps its lateral place on the ramp (see _release_ramp)
+            if ".ramp" in vid:  # keeps its lateral place on the ramp (see _release_ramp)
                 veh.setLaneChangeMode(vid, 0)
                 self._on_ramp.add(vid)
             tid = veh.getTypeID(vid)
             self.types[vid] = tid
             self._static[vid] = (
                 veh.getLength(vid), veh.getWidth(vid), tid.startswith(self.cav_prefix),
-                self.desired.get(vid, np.nan), float(self.destination.get(vid) == "off"),
+                self.desired.get(vid, np.nan), float(self._exit_number(vid)),
             )
         for vid in self.arrived_now:
             if vid in self.trips:
@@ -395,6 +400,8 @@ class SumoWorld:
             trip = trips.get(vid)
             if trip is not None and np.isnan(trip[2]):
                 trip[2] = t
+                self.exit_taken[vid] = self._offramp_of.get(
+                    lanes[i].rpartition("_")[0], self.destination.get(vid, ""))
             if speed[i] < 0.1 and vid not in controlled:
                 half = 0.5 * (self.net.lane_width.get(lanes[i], np.inf) - width[i])
                 if half > 0 and abs(lat[i]) > half + 0.05:
@@ -409,31 +416,40 @@ class SumoWorld:
                 veh.setActionStepLength(vid, self.dt, True)
                 self._every_step.discard(vid)
                 self._clearing.discard(vid)
-        diverge = self.net.diverge_edge
         changed = False
-        tb = self.net.tables
+        tb, main = self.net.tables, self.net.main_route
         for i, lane in enumerate(lanes):
-            if not lane.startswith(diverge + "_") or ids[i] == self.obstacle_id:
+            at = self._diverge.get(lane.rpartition("_")[0])
+            if at is None or ids[i] == self.obstacle_id:
                 continue
             left = float(tb.lane_len[tb.index[lane]]) - float(pos[i])
             if left > self.EXIT_BACKSTOP_MIN_M + self.EXIT_BACKSTOP_S * float(speed[i]):
                 continue
-            on_exit_lane = lane in self._exit_lanes
-            main = self.net.main_route
-            if purpose[i] == 1 and not on_exit_lane:
-                veh.setRoute(ids[i], main[main.index(diverge):])
+            k, exit_lanes = at
+            off = self.net.offramps[k]
+            kind = "cav" if is_cav[i] else "hdv"
+            if purpose[i] == k + 1 and lane not in exit_lanes:
+                veh.setRoute(ids[i], main[main.index(off.diverge_edge):])
                 self.destination[ids[i]] = "main"
-                self.missed_exits["cav" if is_cav[i] else "hdv"] += 1
-            elif purpose[i] == 0 and on_exit_lane:
-                veh.setRoute(ids[i], (diverge, *self.net.offramp_route))
-                self.destination[ids[i]] = "off"
-                self.wrong_exits["cav" if is_cav[i] else "hdv"] += 1
+                self.missed_exits[kind] += 1
+            elif purpose[i] != k + 1 and lane in exit_lanes:
+                if purpose[i] > 0:  # bound for a later exit: it missed that one too
+                    self.missed_exits[kind] += 1
+                veh.setRoute(ids[i], (off.diverge_edge, *off.route))
+                self.destination[ids[i]] = off.name
+                self.wrong_exits[kind] += 1
             else:
                 continue
             st = self._static[ids[i]]
-            self._static[ids[i]] = (*st[:4], float(self.destination[ids[i]] == "off"))
+            self._static[ids[i]] = (*st[:4], float(self._exit_number(ids[i])))
             changed = True
         return changed
+
+    def _exit_number(self, vid: str) -> int:
+        """0 for a vehicle bound for the road's end, k for one bound for the k-th off-ramp
+        (the observation's ``purpose``)."""
+        dest = self.destination.get(vid, "main")
+        return self.net.exit_number(dest) if self.net.offramps else 0
 
     def _row_of(self) -> dict[str, int]:
         """Id -> row in the last observation (built once per observation, when asked)."""

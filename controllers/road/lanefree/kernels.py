@@ -77,6 +77,13 @@ STATIC_CLEAR_M = 0.15
 #: slower than ZIPPER_MOVING_MPS with at least this bumper gap, m.
 STUCK_GAP_M = 1.0
 
+#: A slow CAV whose body reaches more than this over the edges of the road ahead (a strip
+#: that ends, a narrowing) moves sideways in front of a vehicle behind it as a stuck mover
+#: does (:data:`STUCK_GAP_M`), m: else two vehicles behind it, one on each side and each
+#: within the other's side buffer, hold it where it stands, and the one behind it waits
+#: for it (a user's freeway with two on-ramps: a merging CAV stood for 200 s).
+OUTSIDE_TOL_M = 0.05
+
 #: A vehicle behind a mover in its target band goes first (zipper) only when faster than
 #: this, m/s: at a standstill the one ahead goes, or both would wait for each other.
 ZIPPER_MOVING_MPS = 1.0
@@ -374,7 +381,8 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
       for minutes). A human driver alongside that drifts towards the CAV bounds it where it
       will be in :data:`EVADE_S`; a CAV already inside a human driver's clearance moves out
       of it (within the road's edges and the other side's bound) instead of holding still.
-      An announced mover still behind a stopped obstacle moves sideways in front of a
+      An announced mover still behind a stopped obstacle, and a slow CAV whose body is
+      outside the road ahead (:data:`OUTSIDE_TOL_M`), moves sideways in front of a
       vehicle behind it that is slower than :data:`ZIPPER_MOVING_MPS` and at least
       :data:`STUCK_GAP_M` back (in a slow, dense file nobody is far enough back to yield,
       and the mover would wait for ever).
@@ -415,6 +423,10 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
                     if (x - 0.5 * (l_i + length[jj]) < block_reach
                             and abs(dd[i, k]) - 0.5 * (w_i + width[jj]) < P[FM]):
                         stuck = True
+        if (not stuck and has_edges and v_i < ZIPPER_MOVING_MPS
+                and (d_i - 0.5 * w_i < edges[i, 0] - OUTSIDE_TOL_M
+                     or d_i + 0.5 * w_i > edges[i, 1] + OUTSIDE_TOL_M)):
+            stuck = True  # its body outside the road ahead (a strip that ends): it must move
         for k in range(k2):
             x = ds[i, k]
             ddk = dd[i, k]
@@ -498,7 +510,9 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
                         ask[i, k] = True
                         u_yield[i, k] = max(u_c, -P[YD])
             # -- zipper: an announced mover slots in behind the vehicles of its target band
-            if mover_i and not is_leader:
+            # (not behind one standing that it already overlaps: it cannot get behind
+            # that one, which may wait for it to pass, so it passes)
+            if mover_i and not is_leader and not (g < 0 and v_j < ZIPPER_MOVING_MPS):
                 in_target = abs(d[jj] - targets[i]) < half_w + P[FM]
                 if in_target:
                     g_back = -x - half_l

@@ -166,12 +166,16 @@ class RoutePurpose:
             base = (X.through_road(road, exits, p.exit_keep_clear_m, p.exit_commit_m) if keep
                     else X.through_road(road, exits))
         else:
-            row = np.asarray(exits, dtype=float)[k - 1]
+            rows = np.asarray(exits, dtype=float)
+            row = rows[k - 1]
             # the bound reaches the road's far edge exit_prepare_m before the gore
             span = (float(np.max(road.left)) - row[3] if row[3] <= 1e-9
                     else row[2] - float(np.min(road.right)))
             slope = max(span, 0.0) / (p.exit_prepare_m - p.exit_commit_m)
-            base = X.exit_funnel(road, row, p.exit_prepare_m, p.exit_commit_m, slope)
+            # the other exits' strips are not its road: it would leave by them
+            others = np.delete(rows, k - 1, axis=0)
+            own = X.through_road(road, others) if len(others) else road
+            base = X.exit_funnel(own, row, p.exit_prepare_m, p.exit_commit_m, slope)
         if entries is None or view == 1:
             return base
         if view == 0:

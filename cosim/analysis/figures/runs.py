@@ -30,6 +30,7 @@ from matplotlib.patches import Patch, Rectangle
 
 from cosim.analysis.figures.output import save
 from cosim.analysis.figures.style import CAV_COLOUR, HDV_COLOUR, speed_cmap
+from cosim.demand.od_names import destination_number, origin_number
 from cosim.errors import ConfigError
 
 #: Resolution of the animated top view (GIF), dots per inch.
@@ -355,14 +356,19 @@ def _corridor_edges(network: dict, width: float):
 
 def n_curves_figure(trips: pd.DataFrame | str | Path, title: str | None = None):
     """Cumulative counts (N-curves; Cassidy & Bertini 1999) of a run's trips (``trips.csv``):
-    at the merge, the on-ramp's vehicles departing and joining the road; at the off-ramp,
-    the vehicles bound for it departing and leaving the road there, CAVs and human drivers
+    at each on-ramp's merge, its vehicles departing and joining the road; at each off-ramp,
+    the vehicles bound for it departing and leaving the road, CAVs and human drivers
     apart (the vertical distance is the number between, the horizontal one the time taken
     by the vehicle of that rank). A matplotlib Figure, not saved."""
     tr = pd.read_csv(trips) if isinstance(trips, str | Path) else trips
-    fig, axes = plt.subplots(1, 2, figsize=(12, 4), sharey=False)
-    panels = (("on-ramp merge", tr["origin"] == "ramp", "merge_s", "joined the road"),
-              ("off-ramp", tr["destination"] == "off", "exit_s", "left by the off-ramp"))
+    ramps = sorted(set(tr["origin"]) - {"main"}, key=origin_number)
+    offs = sorted(set(tr["destination"]) - {"main"}, key=destination_number)
+    panels = ([(f"on-ramp merge ({o})", tr["origin"] == o, "merge_s", "joined the road")
+               for o in ramps]
+              + [(f"off-ramp ({d})", tr["destination"] == d, "exit_s", "left by an off-ramp")
+                 for d in offs]) or [("no ramp", tr["origin"] == "", "merge_s", "")]
+    fig, axes = plt.subplots(1, len(panels), figsize=(6 * len(panels), 4), squeeze=False)
+    axes = axes[0]
     for ax, (name, sel, col, label) in zip(axes, panels, strict=True):
         for kind, colour in (("cav", CAV_COLOUR), ("hdv", HDV_COLOUR)):
             g = tr[sel & (tr["kind"] == kind)]
