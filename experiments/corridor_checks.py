@@ -20,10 +20,17 @@ on which the law's exit parameters were chosen):
 ``corridor/sl2015``         SUMO's SL2015 drivers alone on the same lane-free corridor
 ``corridor-3lane/lc2013``   SUMO's LC2013 drivers alone on the corridor with three
                             3.4 m lanes (``network.lanes = 3``)
+``freeway-K/cavNN``         a user's freeway with two on-ramps and two off-ramps drawn
+                            from seed K (1-4; :func:`cosim.road.user_roads.draw_freeway`:
+                            netconvert's defaults, 9.6 m, strips of 120-300 m, weaving
+                            sections of 150-600 m; none of them the one the weaving rules
+                            were found on) at 100, 70 and 40 % CAVs, with the OD demand
+                            :data:`FREEWAY_OD_VPH` (4 400 veh/h), demand seed K
 ==========================  ============================================================
 
 600 s per run (240 s in the smoke form), measured after 120 s in 60 s intervals; the
-measurement zone is the weaving section (1 490-2 150 m). Checks (every seed):
+measurement zone is the weaving section (1 490-2 150 m; on a freeway its first one).
+Checks (every seed):
 
 * arms with CAVs: no collision involving a CAV (SUMO's check and ours), no CAV-step off
   the road, no CAV that missed its exit or took one not its own, and the SUMO world's
@@ -62,6 +69,13 @@ OD_VPH = (("main", "main", 4300.0), ("main", "off", 700.0), ("ramp", "main", 750
 DURATION_S, SMOKE_DURATION_S, WARMUP_S, INTERVAL_S = 600.0, 240.0, 120.0, 60.0
 STANDSTILL_MAX_S = 30.0
 OD_PAIRS = ("main_main", "main_off", "ramp_main", "ramp_off")
+#: the user freeways' seeds (each its own drawing and demand seed) and their OD demand,
+#: veh/h (4 400 in all; every pair the road connects: the second on-ramp joins after the
+#: first off-ramp)
+FREEWAY_SEEDS = (1, 2, 3, 4)
+FREEWAY_OD_VPH = (("main", "main", 2200.0), ("main", "off", 400.0), ("main", "off2", 400.0),
+                  ("ramp", "main", 400.0), ("ramp", "off", 200.0), ("ramp", "off2", 200.0),
+                  ("ramp2", "main", 400.0), ("ramp2", "off2", 200.0))
 
 
 def variants(smoke: bool) -> dict[str, dict]:
@@ -76,7 +90,33 @@ def variants(smoke: bool) -> dict[str, dict]:
             for arm, ov in arms.items() for seed in seeds}
 
 
-def plan_data(_out: Path, smoke: bool) -> dict:
+def freeway_variants(out: Path, smoke: bool) -> dict[str, dict]:
+    """Variant name -> overrides of the user freeways (drawn and built with netconvert's
+    defaults into ``out`` + ``_nets``)."""
+    from cosim.road.user_roads import build, draw_freeway
+
+    nets = out.parent / f"{out.name}_nets"
+    found = {}
+    for seed in FREEWAY_SEEDS[:1] if smoke else FREEWAY_SEEDS:
+        road = draw_freeway(seed)
+        net_file = (nets / f"{road.name}.net.xml").resolve()
+        if not net_file.is_file():
+            build(road, nets)
+        for pct in SHARES_PCT:
+            found[f"freeway-{seed}/cav{pct}#{seed}"] = {
+                "network.kind": "file", "network.net_file": str(net_file),
+                "network.route_edges": list(road.route),
+                "network.ramp_edges": [list(r) for r in road.ramps],
+                "network.offramp_edges": [list(r) for r in road.offramps],
+                "demand.od_vph": [list(r) for r in FREEWAY_OD_VPH],
+                "demand.cav_share": pct / 100.0, "scenario.seed": seed,
+                "outputs.zone_start_m": road.narrow_from_m,
+                "outputs.zone_end_m": road.narrow_to_m,
+                "outputs.cross_sections_m": [0.5 * (road.narrow_from_m + road.narrow_to_m)]}
+    return found
+
+
+def plan_data(out: Path, smoke: bool) -> dict:
     duration = SMOKE_DURATION_S if smoke else DURATION_S
     return {
         "sweep": {"name": "corridor_checks" + ("_smoke" if smoke else ""),
@@ -84,7 +124,8 @@ def plan_data(_out: Path, smoke: bool) -> dict:
         "overrides": {"demand.od_vph": [list(r) for r in OD_VPH],
                       "outputs.sumo_collisions": True, "scenario.duration_s": duration,
                       "scenario.warmup_s": WARMUP_S, "scenario.interval_s": INTERVAL_S},
-        "variants": [{"name": k, **v} for k, v in variants(smoke).items()],
+        "variants": [{"name": k, **v} for k, v in {**variants(smoke),
+                                                     **freeway_variants(out, smoke)}.items()],
     }
 
 

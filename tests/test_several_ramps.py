@@ -200,3 +200,28 @@ def test_n_curves_have_a_panel_per_ramp_and_exit():
     titles = [ax.get_title() for ax in fig.axes]
     assert titles == ["on-ramp merge (ramp)", "on-ramp merge (ramp2)", "off-ramp (off)",
                       "off-ramp (off2)"]
+
+
+@pytest.mark.sumo
+@pytest.mark.parametrize("seed", [1, 4])
+def test_a_drawn_user_freeway_has_two_on_ramps_and_two_off_ramps_in_order(seed, tmp_path):
+    from cosim.road.frame import load_road_network
+    from cosim.road.user_roads import build, draw_freeway
+
+    road = draw_freeway(seed)
+    net = load_road_network(build(road, tmp_path), kind="file", main_route=road.route,
+                            ramp_routes=road.ramps, offramp_routes=road.offramps)
+    assert net.origins == ("main", "ramp", "ramp2")
+    assert net.destinations == ("main", "off", "off2")
+    entries, exits = net.entry_strips, net.exit_strips
+    # along the road: acceleration strip, deceleration strip, acceleration, deceleration
+    starts = [entries[0, 0], exits[0, 0], entries[1, 0], exits[1, 0]]
+    assert starts == sorted(starts)
+    p = road.params
+    for i in (0, 1):  # the strips as drawn, give or take what the junctions take and add
+        acc = entries[i, 1] - entries[i, 0]
+        dec = exits[i, 1] - exits[i, 0]
+        assert abs(acc - p[f"acceleration_{i + 1}_m"]) < 60.0
+        assert abs(dec - p[f"deceleration_{i + 1}_m"]) < 60.0
+        assert 150.0 <= p[f"weaving_{i + 1}_m"] <= 600.0
+    assert draw_freeway(seed) == road  # a seed draws the same road

@@ -24,6 +24,7 @@ and the SUMO adapter are checked on the class, not on a few cases:
 ==================  =====================================================================
 
 Every class can carry a stopped vehicle in its narrow section (``obstacle=True``).
+:func:`draw_freeway` draws a freeway with two on-ramps and two off-ramps.
 
 :func:`draw` returns a :class:`UserRoad`: the sources, the main route and where the narrow
 section lies; :func:`build` runs netconvert (defaults only: no option but the output) and
@@ -73,6 +74,9 @@ class UserRoad:
     narrow_width_m: float
     obstacle: tuple[str, float, str] | None = None
     params: dict = field(default_factory=dict)
+    #: a freeway's on-ramp and off-ramp routes (``network.ramp_edges``, ``offramp_edges``)
+    ramps: tuple[tuple[str, ...], ...] = ()
+    offramps: tuple[tuple[str, ...], ...] = ()
 
 
 def _nodes(points: list[tuple[str, float, float]], radius: dict | None = None) -> str:
@@ -252,6 +256,56 @@ def _lane_drop(rng, seed: int, alignment: str | None) -> UserRoad:
                   _edge("three_after", "c", "d", 10.2, lanes=3)])
     return UserRoad(f"lane_drop-{seed}", nod, edg, ("three", "two", "three_after"), x1, x2,
                     6.8, params={"narrow_edge": "two"})
+
+
+#: A drawn freeway's lane count and netconvert's default lane width, m.
+FREEWAY_LANES = 3
+DEFAULT_LANE_M = 3.2
+
+
+def draw_freeway(seed: int) -> UserRoad:
+    """A freeway as a user draws one (netconvert's defaults: 3.2 m lanes, every edge's lanes
+    hung right of its nodes), drawn from ``seed``: two on-ramps, each adding a lane to the
+    road's edge after it (an acceleration strip of 150-300 m), and two off-ramps, each
+    leaving from a lane added to the road's edge before it (a deceleration strip of
+    120-300 m), in the order on-ramp, off-ramp, on-ramp, off-ramp; the weaving section
+    between an acceleration strip and the next deceleration strip 150-600 m, the road
+    between the first off-ramp and the second on-ramp 150-500 m. The ramps meet the road
+    at 8-20 degrees from 200 m away. Its demand names: ``ramp``, ``ramp2``, ``off``,
+    ``off2``; ``narrow_from_m``/``narrow_to_m`` span the first weaving section."""
+    rng = np.random.default_rng([seed, len(CLASSES) + 1])
+    k = FREEWAY_LANES
+    pieces = [("m0", k, float(rng.uniform(300.0, 500.0)))]  # (edge, lanes, length)
+    drawn = {}
+    for i in (1, 2):
+        acc, weave, dec = (float(rng.uniform(150.0, 300.0)), float(rng.uniform(150.0, 600.0)),
+                           float(rng.uniform(120.0, 300.0)))
+        after = float(rng.uniform(150.0, 500.0)) if i == 1 else 400.0
+        pieces += [(f"acc{i}", k + 1, acc), (f"weave{i}", k, weave), (f"dec{i}", k + 1, dec),
+                   (f"after{i}", k, after)]
+        drawn.update({f"acceleration_{i}_m": acc, f"weaving_{i}_m": weave,
+                      f"deceleration_{i}_m": dec, f"after_{i}_m": after})
+    xs = np.cumsum([0.0] + [p[2] for p in pieces])
+    nodes = [(f"n{j}", float(x), 0.0) for j, x in enumerate(xs)]
+    edges = [_edge(eid, f"n{j}", f"n{j + 1}", lanes * DEFAULT_LANE_M, lanes=lanes)
+             for j, (eid, lanes, _) in enumerate(pieces)]
+    names = [p[0] for p in pieces]
+    ramps, offramps = [], []
+    for i in (1, 2):
+        angle = math.radians(float(rng.uniform(8.0, 20.0)))
+        j_in, j_out = names.index(f"acc{i}"), names.index(f"dec{i}") + 1
+        x_in, x_out = xs[j_in], xs[j_out]
+        dx, dy = 200.0 * math.cos(angle), -200.0 * math.sin(angle)
+        nodes += [(f"r{i}", float(x_in - dx), float(dy)), (f"o{i}", float(x_out + dx), float(dy))]
+        edges += [_edge(f"in{i}", f"r{i}", f"n{j_in}", DEFAULT_LANE_M),
+                  _edge(f"out{i}", f"n{j_out}", f"o{i}", DEFAULT_LANE_M)]
+        ramps.append((f"in{i}", f"acc{i}"))
+        offramps.append((f"out{i}",))
+        drawn[f"ramp_angle_{i}_deg"] = math.degrees(angle)
+    w0 = names.index("weave1")
+    return UserRoad(f"freeway-{seed}", _nodes(nodes), _edges(edges), tuple(names),
+                    float(xs[w0]), float(xs[w0 + 1]), k * DEFAULT_LANE_M, params=drawn,
+                    ramps=tuple(ramps), offramps=tuple(offramps))
 
 
 def build(road: UserRoad, folder: Path) -> Path:

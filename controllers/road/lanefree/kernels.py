@@ -78,8 +78,8 @@ STATIC_CLEAR_M = 0.15
 STUCK_GAP_M = 1.0
 
 #: A slow CAV whose body reaches more than this over the edges of the road ahead (a strip
-#: that ends, a narrowing) moves sideways in front of a vehicle behind it as a stuck mover
-#: does (:data:`STUCK_GAP_M`), m: else two vehicles behind it, one on each side and each
+#: that ends, a narrowing) moves sideways in front of a CAV behind it as a stuck mover
+#: does (:data:`STUCK_GAP_M`), m: else two CAVs behind it, one on each side and each
 #: within the other's side buffer, hold it where it stands, and the one behind it waits
 #: for it (a user's freeway with two on-ramps: a merging CAV stood for 200 s).
 OUTSIDE_TOL_M = 0.05
@@ -381,11 +381,11 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
       for minutes). A human driver alongside that drifts towards the CAV bounds it where it
       will be in :data:`EVADE_S`; a CAV already inside a human driver's clearance moves out
       of it (within the road's edges and the other side's bound) instead of holding still.
-      An announced mover still behind a stopped obstacle, and a slow CAV whose body is
-      outside the road ahead (:data:`OUTSIDE_TOL_M`), moves sideways in front of a
-      vehicle behind it that is slower than :data:`ZIPPER_MOVING_MPS` and at least
-      :data:`STUCK_GAP_M` back (in a slow, dense file nobody is far enough back to yield,
-      and the mover would wait for ever).
+      An announced mover still behind a stopped obstacle moves sideways in front of a
+      vehicle behind it (a slow CAV whose body is outside the road ahead,
+      :data:`OUTSIDE_TOL_M`, in front of a CAV behind it) that is slower than
+      :data:`ZIPPER_MOVING_MPS` and at least :data:`STUCK_GAP_M` back (in a slow, dense
+      file nobody is far enough back to yield, and the mover would wait for ever).
     """
     k2 = j.shape[1]
     u_long = np.empty(n)
@@ -423,10 +423,11 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
                     if (x - 0.5 * (l_i + length[jj]) < block_reach
                             and abs(dd[i, k]) - 0.5 * (w_i + width[jj]) < P[FM]):
                         stuck = True
-        if (not stuck and has_edges and v_i < ZIPPER_MOVING_MPS
-                and (d_i - 0.5 * w_i < edges[i, 0] - OUTSIDE_TOL_M
-                     or d_i + 0.5 * w_i > edges[i, 1] + OUTSIDE_TOL_M)):
-            stuck = True  # its body outside the road ahead (a strip that ends): it must move
+        # its body outside the road ahead (a strip that ends): it must move (in front of
+        # CAVs behind it only: a human driver behind does not know it waits for him)
+        outside = (not stuck and has_edges and v_i < ZIPPER_MOVING_MPS
+                   and (d_i - 0.5 * w_i < edges[i, 0] - OUTSIDE_TOL_M
+                        or d_i + 0.5 * w_i > edges[i, 1] + OUTSIDE_TOL_M))
         for k in range(k2):
             x = ds[i, k]
             ddk = dd[i, k]
@@ -451,7 +452,8 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
             root = math.sqrt(max(P[EBT2] + v_lead * v_lead + P[E2B] * g_pair, 0.0))
             v_ok = 0.0 if g_pair < 0 else P[EMBT] + root
             al = al or ((v_follow > v_ok - P[CIM]) and (v_follow > 0.01))
-            if stuck and not ahead and v_j < ZIPPER_MOVING_MPS and -x - half_l > STUCK_GAP_M:
+            if ((stuck or (outside and j_cav)) and not ahead and v_j < ZIPPER_MOVING_MPS
+                    and -x - half_l > STUCK_GAP_M):
                 al = False  # a slow vehicle behind lets a stuck mover in front of it
             shift = P[SHC] if j_cav else abs(v_lat[jj]) * dt
             if not j_cav:  # a human driver drifting towards it: where it will be
@@ -510,9 +512,10 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
                         ask[i, k] = True
                         u_yield[i, k] = max(u_c, -P[YD])
             # -- zipper: an announced mover slots in behind the vehicles of its target band
-            # (not behind one standing that it already overlaps: it cannot get behind
+            # (not behind a CAV standing that it already overlaps: it cannot get behind
             # that one, which may wait for it to pass, so it passes)
-            if mover_i and not is_leader and not (g < 0 and v_j < ZIPPER_MOVING_MPS):
+            if mover_i and not is_leader and not (g < 0 and v_j < ZIPPER_MOVING_MPS
+                                                  and j_cav):
                 in_target = abs(d[jj] - targets[i]) < half_w + P[FM]
                 if in_target:
                     g_back = -x - half_l
