@@ -2,8 +2,9 @@
 
 :func:`load_road_network` reads a ``.net.xml`` with sumolib and builds the frame of the
 main route (with its on-ramps and off-ramps, :mod:`cosim.road.ramps`) from the lanes' real
-geometry, as SUMO lays them out: :class:`RoadNetwork`. ``s`` (m) runs as SUMO measures the main route (its lanes'
-lengths plus the junction lanes between them), across junctions and the ring's seam;
+geometry, as SUMO lays them out: :class:`RoadNetwork`. ``s`` (m) runs as SUMO measures the
+main route (its lanes' lengths plus the junction lanes between them), across junctions and
+the ring's seam;
 ``d`` (m) is positive to the left of the reference line, the centre line of the main
 route's lanes.
 
