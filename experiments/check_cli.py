@@ -64,6 +64,18 @@ def numbers(frame: pd.DataFrame, col: str) -> np.ndarray:
     return pd.to_numeric(frame[col], errors="coerce").to_numpy(float)
 
 
+def runs_by_arm(results: pd.DataFrame, share_of: Callable[[str], int]):
+    """``(arm, CAV share %, the arm's runs that finished, whether one failed, collisions
+    with a CAV per finished run (SUMO's check and ours; SUMO's counts 0 when it was off))``
+    for each arm of a check sweep (variants named ``ARM#SEED``), in arm order."""
+    res = results.assign(arm=results["variant"].map(arm_of))
+    for arm, g in res.groupby("arm", sort=True):
+        ok = g[g["status"] == "ok"]
+        cav_coll = np.nan_to_num(numbers(ok, "collisions_sumo_cav")) + numbers(
+            ok, "collisions_geometric_cav")
+        yield arm, share_of(arm), ok, len(ok) < len(g), cav_coll
+
+
 def check_rows(arm: str, criteria: list, n_runs: int, failed: bool) -> list[dict]:
     """One row per ``(name, values (seeds,), limit, unit)`` of ``criteria``: the worst
     seed and whether every one of the ``n_runs`` runs kept ``values <= limit`` (a run

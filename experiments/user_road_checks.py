@@ -62,7 +62,7 @@ import pandas as pd
 
 from cosim.errors import ConfigError
 from experiments import check_cli
-from experiments.check_cli import arm_of, numbers
+from experiments.check_cli import numbers
 from experiments.lanefree_checks import _markdown
 
 SEEDS = (101, 102, 103)
@@ -173,14 +173,8 @@ def share_of(arm: str) -> int:
 def evaluate(results: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
     """(checks, arms): one row per (arm, check) with the worst seed and whether every seed
     passed; one row per arm with the reported figures (means over seeds)."""
-    res = results.assign(arm=results["variant"].map(arm_of))
     checks, arms = [], []
-    for arm, g in res.groupby("arm", sort=True):
-        pct = share_of(arm)
-        ok = g[g["status"] == "ok"]
-        failed = len(ok) < len(g)
-        cav_coll = np.nan_to_num(numbers(ok, "collisions_sumo_cav")) + numbers(
-            ok, "collisions_geometric_cav")
+    for arm, pct, ok, failed, cav_coll in check_cli.runs_by_arm(results, share_of):
         crit = []
         if pct > 0:
             crit += [("CAV collisions (SUMO + ours)", cav_coll, 0.0, "events"),

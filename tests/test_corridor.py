@@ -105,7 +105,7 @@ def corridor_summary(overrides: dict) -> dict:
     return row
 
 
-def _env(tmp_path) -> dict:
+def sumo_env(tmp_path) -> dict:
     e = dict(os.environ)
     e["COSIM_NETWORK_CACHE"] = str(tmp_path / "nets")
     return e
@@ -122,7 +122,7 @@ def test_cavs_reach_their_exits_on_the_corridor(share, tmp_path):
     ov = {**SMALL, "demand.od_vph": OD, "demand.cav_share": share,
           "scenario.duration_s": 150.0, "scenario.warmup_s": 30.0,
           "scenario.interval_s": 30.0, "outputs.sumo_collisions": True}
-    r = run_isolated(corridor_summary, ov, env=_env(tmp_path))
+    r = run_isolated(corridor_summary, ov, env=sumo_env(tmp_path))
     for key in CLEAN:
         assert r[key] == 0, (key, r[key])
     assert r["max_standstill_s"] <= 30.0
@@ -150,16 +150,22 @@ USER_EDGES = """<edges>
 </edges>"""
 
 
-def _user_net(tmp_path) -> str:
+def netconvert_defaults(folder, nodes: str, edges: str) -> str:
+    """A network built from plain ``nodes`` / ``edges`` XML with netconvert's defaults
+    only, as a user builds one; the ``.net.xml`` path."""
     from cosim.sumo.binaries import netconvert_binary
 
-    (tmp_path / "u.nod.xml").write_text(USER_NODES)
-    (tmp_path / "u.edg.xml").write_text(USER_EDGES)
-    out = tmp_path / "u.net.xml"
-    subprocess.run([str(netconvert_binary()), "-n", str(tmp_path / "u.nod.xml"), "-e",
-                    str(tmp_path / "u.edg.xml"), "-o", str(out)], check=True,
+    (folder / "u.nod.xml").write_text(nodes)
+    (folder / "u.edg.xml").write_text(edges)
+    out = folder / "u.net.xml"
+    subprocess.run([str(netconvert_binary()), "-n", str(folder / "u.nod.xml"), "-e",
+                    str(folder / "u.edg.xml"), "-o", str(out)], check=True,
                    capture_output=True)
     return str(out)
+
+
+def _user_net(tmp_path) -> str:
+    return netconvert_defaults(tmp_path, USER_NODES, USER_EDGES)
 
 
 def user_summary(net_file: str, share: float) -> dict:
@@ -181,7 +187,7 @@ def user_summary(net_file: str, share: float) -> dict:
 @pytest.mark.slow(seconds=15)
 def test_cavs_reach_their_exits_on_a_users_network(tmp_path):
     net_file = _user_net(tmp_path)
-    r = run_isolated(user_summary, net_file, 1.0, env=_env(tmp_path))
+    r = run_isolated(user_summary, net_file, 1.0, env=sumo_env(tmp_path))
     for key in CLEAN:
         assert r[key] == 0, (key, r[key])
     assert r["trips_main_off"] >= 5 and r["trips_ramp_off"] >= 2

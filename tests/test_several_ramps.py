@@ -8,11 +8,9 @@ process (``tests/sumo_cases/isolated.py``).
 
 from __future__ import annotations
 
-import os
-import subprocess
-
 import pytest
 from sumo_cases.isolated import run_isolated
+from test_corridor import CLEAN, netconvert_defaults, sumo_env
 
 from cosim.config import load_scenario
 from cosim.demand.od_names import destination_number, origin_number
@@ -56,15 +54,7 @@ OD = [["main", "main", 2000.0], ["main", "off", 500.0], ["main", "off2", 500.0],
 
 
 def _net(tmp_path) -> str:
-    from cosim.sumo.binaries import netconvert_binary
-
-    (tmp_path / "u.nod.xml").write_text(NODES)
-    (tmp_path / "u.edg.xml").write_text(EDGES)
-    out = tmp_path / "u.net.xml"
-    subprocess.run([str(netconvert_binary()), "-n", str(tmp_path / "u.nod.xml"), "-e",
-                    str(tmp_path / "u.edg.xml"), "-o", str(out)], check=True,
-                   capture_output=True)
-    return str(out)
+    return netconvert_defaults(tmp_path, NODES, EDGES)
 
 
 def _spec(net_file: str, **kw) -> NetworkSpec:
@@ -153,17 +143,11 @@ def several_ramps_summary(net_file: str, share: float) -> dict:
     return row
 
 
-CLEAN = ("collisions_geometric_cav", "collisions_sumo_cav", "boundary_vehicle_steps_cav",
-         "missed_exits_cav", "wrong_exits_cav", "exit_backstop_cav")
-
-
 @pytest.mark.sumo
 @pytest.mark.slow(seconds=30)
 @pytest.mark.parametrize("share", [1.0, 0.7])
 def test_cavs_reach_each_of_several_exits(share, tmp_path):
-    env = dict(os.environ)
-    env["COSIM_NETWORK_CACHE"] = str(tmp_path / "nets")
-    r = run_isolated(several_ramps_summary, _net(tmp_path), share, env=env)
+    r = run_isolated(several_ramps_summary, _net(tmp_path), share, env=sumo_env(tmp_path))
     for key in CLEAN:
         assert r[key] == 0, (key, r[key], r["reached"])
     assert r["max_standstill_s"] <= 30.0
