@@ -155,6 +155,17 @@ class RoutePurpose:
                 out[i] |= bool(np.any((ds > -ahead) & (ds < reach)))
         return out
 
+    def exit_road(self, obs: Observation, k: int):
+        """The road of a CAV leaving by exit ``k`` without its funnel: the road with the
+        other exits' strips taken out, then the strip of exit ``k`` after its gore
+        (:func:`controllers.road.exits.exit_road`); the walls it must not pass."""
+        from controllers.road import exits as X
+
+        rows = np.asarray(obs.exits, dtype=float)
+        others = np.delete(rows, k - 1, axis=0)
+        own = X.through_road(obs.road, others) if len(others) else obs.road
+        return X.exit_road(own, rows[k - 1])
+
     def _road_of(self, road, exits, entries, k: int, keep: bool, view: int):
         """The road of group (exit ``k``, keeping the band clear, entry ``view``)."""
         from controllers.road import exits as X
