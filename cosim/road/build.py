@@ -27,7 +27,7 @@ import shutil
 import subprocess
 import tempfile
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -359,7 +359,7 @@ def build_network(spec: NetworkSpec, cache_dir: Path | str | None = None) -> Roa
             unreadable, or the route's edges are not connected.
     """
     if spec.kind == "file":
-        return _load_user_network(spec)
+        return _load_user_network(spec, cache_dir)
     root = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     target = root / f"{spec.kind}-{spec_hash(spec)}"
     sources = _SOURCE_BUILDERS[spec.kind](spec)
@@ -417,11 +417,22 @@ def _check_ring_length(net: RoadNetwork, spec: NetworkSpec) -> None:
         )
 
 
-def _load_user_network(spec: NetworkSpec) -> RoadNetwork:
+def _load_user_network(spec: NetworkSpec, cache_dir: Path | str | None = None) -> RoadNetwork:
+    """The road frame of the user's network: of a copy without the forks onto its
+    off-ramps' strips when it has any (:mod:`cosim.road.forks`; ``source_file`` and
+    ``forks_removed`` record it), else of the file itself."""
+    from cosim.road.forks import forks, without_forks
+    from cosim.road.sumo_net import read_sumo_net
+
     path = Path(str(spec.net_file)).expanduser()
     if not path.is_file():
         raise NetworkError(f"network file not found: {path}")
-    return load_road_network(
+    taken_out = tuple(forks(read_sumo_net(path), spec.route_edges, spec.offramp_routes()))
+    source = path
+    if taken_out:
+        root = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+        path = without_forks(path, taken_out, root)
+    net = load_road_network(
         path,
         kind="file",
         main_route=spec.route_edges,
@@ -430,3 +441,4 @@ def _load_user_network(spec: NetworkSpec) -> RoadNetwork:
         periodic=False,
         speed_limit_mps=None,
     )
+    return replace(net, source_file=source.resolve(), forks_removed=taken_out)

@@ -133,6 +133,11 @@ class RoadNetwork:
     #: the on-ramps and off-ramps (:mod:`cosim.road.ramps`), in the order given
     ramps: tuple[OnRamp, ...] = ()
     offramps: tuple[OffRamp, ...] = ()
+    #: kind ``file``: the user's file, when ``net_file`` is a copy of it without the forks
+    #: at the main route's joints (:mod:`cosim.road.forks`), and the connections taken out
+    #: ``(from edge, to edge, from lane, to lane)``
+    source_file: Path | None = None
+    forks_removed: tuple[tuple[str, str, int, int], ...] = ()
 
     # ---- the first on-ramp (the onramp and corridor kinds have one) --------------------
 
