@@ -371,6 +371,7 @@ def trip_summary(trips, world) -> dict:
     for kind in ("cav", "hdv"):
         out[f"exit_backstop_{kind}"] = int(missed.get(kind, 0) + wrong.get(kind, 0))
     out["offramp_lateral_fixes"] = int(getattr(world, "offramp_lateral_fixes", 0))
+    out["strip_lateral_fixes"] = int(getattr(world, "strip_lateral_fixes", 0))
     return out
 
 
