@@ -64,7 +64,10 @@ def test_lanefree_law_matches_reference(name):
     u, stats = rx.replay_law(steps, _limits(name))
     ok, err = _close(np.concatenate(u), LAW[f"{name}/u_law"], REL, ABS_LAW)
     assert ok, f"{name}: law commands differ by up to {err:g} m/s^2"
-    assert stats == json.loads(str(LAW[f"{name}/law_stats"]))
+    want = json.loads(str(LAW[f"{name}/law_stats"]))
+    assert {k: stats[k] for k in want} == want
+    # counters added after the reference was recorded: no reference case has an exit
+    assert stats.keys() - want.keys() <= {"creeps"} and stats.get("creeps", 0) == 0
 
 
 @pytest.mark.parametrize("harsh", [False, True], ids=["law_commands", "harsh_commands"])
