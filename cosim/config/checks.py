@@ -67,6 +67,10 @@ def check_scenario(sc: Scenario) -> None:
                       else min(widths) if widths else None)
         _check_obstacle(sc, length, road_width)
     _check_obstacle_joints(sc)
+    if sc.scenario.world != "sumo" and sc.demand.human_model != "sl2015":
+        raise ConfigError(f"demand.human_model={sc.demand.human_model!r} is a model of SUMO's "
+                          f"drivers: it needs scenario.world = \"sumo\" (got "
+                          f"{sc.scenario.world!r})")
 
 
 def check_sections(sc: Scenario) -> None:

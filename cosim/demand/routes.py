@@ -16,10 +16,11 @@ for v0) and as ``<param key="desiredSpeed">``.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
+from cosim.demand.humans import TUM_MODELS, reaction_times, vtype_id
 from cosim.demand.plan import DemandPlan, _Vehicle, plan_vehicles, route_id
 from cosim.demand.spec import (
     ACCEL_MPS2,
@@ -117,7 +118,7 @@ def lane_change_attributes(kind: str, lanes: bool) -> dict[str, str]:
     return attrs
 
 
-def vtype_lines(demand: DemandSpec, lanes: bool) -> list[str]:
+def vtype_lines(demand: DemandSpec, lanes: bool, human_taus=()) -> list[str]:
     """``<vType>`` elements: ``cav_<k>`` and ``hdv_<k>`` for every size class.
 
     Car following is SUMO's Krauss model: CAVs with ``sigma = 0`` and ``tau =``
@@ -125,15 +126,18 @@ def vtype_lines(demand: DemandSpec, lanes: bool) -> list[str]:
     road kinds (the lane-free and three-lane human arms differ only in lanes). Lane
     changing: :func:`lane_change_attributes` (``lanes=False``: lane-free road, SL2015;
     ``lanes=True``: three_lane baseline, LC2013).
+    With one of TUM's human models (``demand.human_model``, :mod:`cosim.demand.humans`)
+    the human types are ``hdv_<k>_t<centiseconds>`` instead, one per (class k, reaction
+    time) in ``human_taus`` (pairs ``(k, tau_s)``), with that model's attributes.
     CAV types are drawn in :data:`CAV_RGB` (blue), HDV types in :data:`HDV_RGB` (orange).
     """
     out = []
     # CAVs get a short reaction time ``tau`` so that SUMO's insertion check lets
     # them enter at CAV headways (our controller drives them from the first step).
-    for kind, colour, sigma, tau in (
-        (CAV_PREFIX, CAV_RGB, 0.0, CAV_TAU_S),
-        (HDV_PREFIX, HDV_RGB, HDV_SIGMA, HDV_TAU_S),
-    ):
+    kinds = [(CAV_PREFIX, CAV_RGB, 0.0, CAV_TAU_S)]
+    if demand.human_model == "sl2015":
+        kinds.append((HDV_PREFIX, HDV_RGB, HDV_SIGMA, HDV_TAU_S))
+    for kind, colour, sigma, tau in kinds:
         colour = ",".join(str(c) for c in colour)
         lc = " ".join(f'{k}="{v}"' for k, v in lane_change_attributes(kind, lanes).items())
         for k, (length, width, _p) in enumerate(demand.size_classes):
@@ -146,7 +150,37 @@ def vtype_lines(demand: DemandSpec, lanes: bool) -> list[str]:
                 f'        <param key="cosim.kind" value="{kind}"/>\n'
                 f"    </vType>"
             )
+    if demand.human_model != "sl2015":
+        model = TUM_MODELS[demand.human_model]
+        colour = ",".join(str(c) for c in HDV_RGB)
+        for k, tau in sorted(set(human_taus)):
+            length, width, _p = demand.size_classes[k]
+            attrs = " ".join(f'{a}="{v}"' for a, v in model.vtype_attributes(tau, lanes).items())
+            out.append(
+                f'    <vType id="{vtype_id(f"{HDV_PREFIX}_{k}", tau)}" vClass="passenger" '
+                f'length="{length}" width="{width}" maxSpeed="{VTYPE_MAX_SPEED_MPS}" '
+                f'speedDev="0" color="{colour}" {attrs}>\n'
+                f'        <param key="cosim.kind" value="{HDV_PREFIX}"/>\n'
+                f"    </vType>"
+            )
     return out
+
+
+def with_human_model(vehicles: list[_Vehicle], demand: DemandSpec, seed: int):
+    """``(vehicles, human_taus)``: with one of TUM's human models every human driver gets
+    its reaction time (:func:`cosim.demand.humans.reaction_times`, in the order of
+    ``vehicles``) and the vType of its class and reaction time; ``human_taus`` the pairs
+    ``(class, tau_s)`` used. Unchanged, with no pairs, for ``"sl2015"``."""
+    if demand.human_model == "sl2015":
+        return vehicles, []
+    hdv = [i for i, v in enumerate(vehicles) if not v.is_cav]
+    taus = reaction_times(len(hdv), TUM_MODELS[demand.human_model], seed)
+    out = list(vehicles)
+    pairs = []
+    for i, tau in zip(hdv, taus.tolist(), strict=True):
+        out[i] = replace(vehicles[i], vtype=vtype_id(vehicles[i].vtype, tau))
+        pairs.append((int(vehicles[i].vtype.rsplit("_", 1)[1]), tau))
+    return out, pairs
 
 
 def _route_lines(net: RoadNetwork, repeat: int | None) -> list[str]:
@@ -195,9 +229,10 @@ def write_routes(net: RoadNetwork, demand: DemandSpec, seed: int, path: Path | s
     if plan is None:
         plan = plan_vehicles(net, demand, seed, horizon_s)
     vehicles, process, repeat = plan.vehicles, plan.process, plan.ring_route_repeat
+    vehicles, human_taus = with_human_model(vehicles, demand, seed)
     lines = ['<?xml version="1.0" encoding="UTF-8"?>', f"<!-- cosim demand, seed {seed} -->",
              "<routes>"]
-    lines += vtype_lines(demand, lanes=net.lane_based)
+    lines += vtype_lines(demand, lanes=net.lane_based, human_taus=human_taus)
     lines += _route_lines(net, repeat)
     lines += [_vehicle_line(v) for v in vehicles]
     lines.append("</routes>")

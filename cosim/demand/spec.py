@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cosim.demand.humans import HUMAN_MODELS
 from cosim.demand.od_names import destination_number, origin_number
 from cosim.errors import ConfigError
 
@@ -205,6 +206,11 @@ class DemandSpec:
             rows from ``"main"``) and ``ramp_inflow_vph`` (from ``"ramp"``): each
             origin's arrivals are one stream of its rows' total flow,
             each vehicle drawn a destination in proportion to its origin's rows.
+        human_model: the human drivers (:mod:`cosim.demand.humans`): ``"sl2015"``
+            (SUMO's drivers, calibrated: the ``HDV_*`` constants below) or TUM
+            LaneFreeDrive's ``StripBasedHuman`` with the constants of their TRB 2024
+            (``"tum_trb2024"``) or TRC 2025 (``"tum_trc2025"``) runs: their Krauss law and
+            per-vehicle reaction time N(1.5, 0.5) s, their lateral speed. SUMO world only.
     """
 
     inflow_vph: float = 1800.0
@@ -222,6 +228,7 @@ class DemandSpec:
     slot_headway_s: float = 1.2
     slot_spacing_m: float = 2.55
     od_vph: tuple[tuple[str, str, float], ...] = ()
+    human_model: str = "sl2015"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "desired_speed_mps", tuple(self.desired_speed_mps))
@@ -253,6 +260,7 @@ class DemandSpec:
         if not (math.isfinite(self.slot_spacing_m) and self.slot_spacing_m > 0):
             raise ConfigError(f"demand.slot_spacing_m must be > 0 (got {self.slot_spacing_m})")
         self._validate_od()
+        _choice("human_model", self.human_model, HUMAN_MODELS)
 
     def _validate_od(self) -> None:
         seen = set()
