@@ -360,7 +360,7 @@ def plan(P, rows, frac, lo, hi, current, j, ds, s, d, v, length, width, is_cav, 
 # ------------------------------------------------------------------ interactions
 @njit(cache=True)
 def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targets,
-             urgent, held, lead_gap, lead_v, v_des, edges, has_edges, static):
+             urgent, held, lead_gap, lead_v, v_des, edges, has_edges, static, evade_edges):
     """Everything of one step that needs the window, per CAV:
 
     * side bounds ``hi``, ``lo`` (N,) m (the law's ``_side``);
@@ -380,7 +380,10 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
       by the traffic passing on the other side (a user's neck with a stopped car: standing
       for minutes). A human driver alongside that drifts towards the CAV bounds it where it
       will be in :data:`EVADE_S`; a CAV already inside a human driver's clearance moves out
-      of it (within the road's edges and the other side's bound) instead of holding still.
+      of it (within ``evade_edges`` (N, 2) m and the other side's bound) instead of holding
+      still: the band the law keeps clear beside an exit's strip for a human driver
+      leaving is no wall to a CAV a human driver moves onto (a user's freeway: a driver at
+      34.7 m/s moved onto a CAV held at that band's border).
       An announced mover still behind a stopped obstacle moves sideways in front of a
       vehicle behind it (a slow CAV whose body is outside the road ahead,
       :data:`OUTSIDE_TOL_M`, in front of a CAV behind it) that is slower than
@@ -559,11 +562,20 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
                          vmax)
             v_lo_e = min(v_lo_e, v_hi_e)
         # inside a human driver's clearance (it moved towards the CAV): move out of it,
-        # within the road's edges and the other side's bound
-        if hi_human and hi < d_i:
-            v_hi_n = max(-min(math.sqrt(a2 * (d_i - hi)), vmax), v_lo_e)
-        if lo_human and lo > d_i:
-            v_lo_n = min(min(math.sqrt(a2 * (lo - d_i)), vmax), v_hi_e)
+        # within the edges it may evade in and the other side's bound
+        if (hi_human and hi < d_i) or (lo_human and lo > d_i):
+            hi_p = evade_edges[i, 1] - 0.5 * w_i - P[EM]
+            lo_p = evade_edges[i, 0] + 0.5 * w_i + P[EM]
+            v_hi_p = min(max(np.sign(hi_p - d_i) * math.sqrt(a2 * abs(hi_p - d_i)), -vmax),
+                         vmax)
+            v_lo_p = min(min(max(-np.sign(d_i - lo_p) * math.sqrt(a2 * abs(d_i - lo_p)),
+                                 -vmax), vmax), v_hi_p)
+            if hi_human and hi < d_i:
+                v_hi_n = max(-min(math.sqrt(a2 * (d_i - hi)), vmax), v_lo_p)
+                v_lo_e = min(v_lo_e, v_lo_p)
+            if lo_human and lo > d_i:
+                v_lo_n = min(min(math.sqrt(a2 * (lo - d_i)), vmax), v_hi_p)
+                v_hi_e = max(v_hi_e, v_hi_p)
         want = vl_i + ul * dt
         v_next = min(max(min(max(want, v_lo_e), v_hi_e), v_lo_n), v_hi_n)
         if v_lo_n > v_hi_n:
@@ -680,11 +692,13 @@ def _pull_to_rows(P, target, urgent, s, d, v, v_des, length, width, lo, hi, n, s
 
 @njit(cache=True)
 def law_step(P, s, d, v, v_lat, length, width, accel, is_cav, n, order, k_side, periodic,
-             period, target0, urgent0, due0, fixed, edges_ahead, loop_edges, has_loop_edges,
+             period, target0, urgent0, due0, fixed, edges_ahead, evade_ahead, loop_edges,
+             has_loop_edges,
              v_des, static_idx, held, candidate_step_m, hysteresis_mps, queue_hysteresis,
              congested_hysteresis, row_pull, lat_max, reach_lead):
     """The law's step after its inputs (see the law's ``compute``): the road edges of the
-    target's look-ahead (``edges_ahead``, never wider than ``loop_edges``), the neighbour
+    target's look-ahead (``edges_ahead``, never wider than ``loop_edges``; ``evade_ahead``
+    the same a CAV may evade a human driver within), the neighbour
     window, the lateral targets of the CAVs whose turn it is (``due0``), the primary
     leaders, the window terms and the command clipped to the actuator box.
 
@@ -694,15 +708,21 @@ def law_step(P, s, d, v, v_lat, length, width, accel, is_cav, n, order, k_side, 
     """
     # lowest and highest lateral centre inside the road ahead
     edges = np.empty((n, 2))
+    evade = np.empty((n, 2))  # the same for evading a human driver (``evade_ahead``)
     lo = np.empty(n)
     hi = np.empty(n)
     for i in range(n):
         e0, e1 = edges_ahead[i, 0], edges_ahead[i, 1]
+        f0, f1 = evade_ahead[i, 0], evade_ahead[i, 1]
         if has_loop_edges:
             e0 = max(e0, loop_edges[i, 0])
             e1 = min(e1, loop_edges[i, 1])
+            f0 = max(f0, loop_edges[i, 0])
+            f1 = min(f1, loop_edges[i, 1])
         edges[i, 0] = e0
         edges[i, 1] = e1
+        evade[i, 0] = f0
+        evade[i, 1] = f1
         lo[i] = e0 + 0.5 * width[i] + P[EM]
         hi[i] = e1 - 0.5 * width[i] - P[EM]
     m = s.shape[0]
@@ -780,7 +800,7 @@ def law_step(P, s, d, v, v_lat, length, width, accel, is_cav, n, order, k_side, 
         static[static_idx[q]] = True
     u_long, hi_n, lo_n, u_lat, ask, u_yield, n_asked = interact(
         P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, target, urgent, held,
-        lead_gap, lead_v, v_des, edges, True, static)
+        lead_gap, lead_v, v_des, edges, True, static, evade)
     u = np.empty((n, 2))
     for i in range(n):
         u[i, 0] = min(max(u_long[i], P[LMIN]), P[LMAX])

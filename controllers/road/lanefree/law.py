@@ -181,7 +181,7 @@ class LaneFreeFlocking:
         k_side = min(p.window, max((m - 1) // 2, 1)) if periodic else p.window
         v_des = np.ascontiguousarray(obs.desired_speed, dtype=float) \
             if obs.desired_speed is not None else np.full(n, 30.0)
-        edges, loop_edges = self._band_edges(obs, sc)
+        edges, loop_edges, evade_edges = self._band_edges(obs, sc)
         held = self._held(obs, sc, order, periodic, period)
         # primary leader in the current band, searched as far as braking needs
         reach = float(sc.v[:n].max()) ** 2 / (2 * p.comfort_decel_mps2) + 30.0
@@ -189,7 +189,8 @@ class LaneFreeFlocking:
          self._edges_plan) = _kernels().law_step(
             self._pack(obs.dt), sc.s, sc.d, sc.v, sc.v_lat, sc.length, sc.width, sc.accel,
             sc.is_cav, n, order, k_side, periodic, period, target, urgent, due,
-            p.lateral_mode == "fixed", edges, loop_edges, loop_edges is not None, v_des,
+            p.lateral_mode == "fixed", edges, evade_edges, loop_edges, loop_edges is not None,
+            v_des,
             _NO_STATIC if sc.n == len(sc.s) else np.flatnonzero(sc.static), held,
             float(p.candidate_step_m), float(p.hysteresis_mps),
             float(p.queue_hysteresis), float(p.congested_hysteresis_mps), float(p.row_pull),
@@ -361,10 +362,13 @@ class LaneFreeFlocking:
     # ------------------------------------------------------------------ lateral target
     def _band_edges(self, obs: Observation, sc: _Scene):
         """Road edges (N, 2) m over the target's look-ahead (the road's narrowest ahead, or
-        the loop's edges, or none: +-inf) and the loop's edges (N, 2) m or None; the kernel
-        takes the narrower of the two and the band of lateral centres inside them."""
+        the loop's edges, or none: +-inf), the loop's edges (N, 2) m or None (the kernel
+        takes the narrower of the two and the band of lateral centres inside them), and the
+        edges (N, 2) m a CAV may evade a human driver within: the first without the band
+        kept clear beside an exit's strip (``keep_clear`` of the purpose's roads)."""
         p = self.params
         n = sc.n
+        evade = None
         if obs.road is not None and obs.road.is_constant:  # its edges everywhere
             edges = obs.road.edges(sc.s[:n])
         elif obs.road is not None:
@@ -372,6 +376,11 @@ class LaneFreeFlocking:
             edges = np.empty((n, 2))
             for _k, rows, road, cap in self._purpose.roads(obs):
                 edges[rows] = road.narrowest(sc.s[:n][rows], np.minimum(ahead[rows], cap))
+            if obs.exits is not None and len(obs.exits):
+                evade = np.empty((n, 2))
+                for _k, rows, road, cap in self._purpose.roads(obs, keep_clear=False):
+                    evade[rows] = road.narrowest(sc.s[:n][rows],
+                                                 np.minimum(ahead[rows], cap))
         elif obs.road_edges is not None:
             edges = obs.road_edges
         else:
@@ -381,7 +390,8 @@ class LaneFreeFlocking:
             # writable and contiguous: a read-only copy (delayed messages) would make numba
             # compile law_step once more
             loop_edges = _c_writable(obs.road_edges)
-        return _c_writable(edges), loop_edges
+        edges = _c_writable(edges)
+        return edges, loop_edges, edges if evade is None else _c_writable(evade)
 
     # ------------------------------------------------------------------ longitudinal
     def _narrowing(self, obs, sc, side, road=None) -> np.ndarray:

@@ -26,7 +26,7 @@ class RoutePurpose:
         self.params = params
         self._cache = None  # (key of the road, exits and entries, {group: road})
 
-    def roads(self, obs: Observation) -> list:
+    def roads(self, obs: Observation, keep_clear: bool = True) -> list:
         """``(k, rows, road, reach_m)`` covering the CAVs: the road each group drives on
         (k = 0: on the road, k >= 1: leaving by exit k; :mod:`controllers.road.exits`) and
         how far ahead (m) its band edges look at most. Without exits or entry strips, every
@@ -42,7 +42,8 @@ class RoutePurpose:
           them;
         * a CAV that stays on the road with a human driver near (:meth:`humans_near`)
           keeps ``exit_keep_clear_m`` beside the exit's strip free for that driver to
-          cross;
+          cross (not with ``keep_clear=False``: the road a CAV may evade a human driver
+          on);
         * a CAV whose body is not on an entry strip (an on-ramp's acceleration lane) drives
           on its road without the strip: through traffic leaves it to merging traffic;
         * a CAV on an entry strip with a human driver in the road's band beside the strip,
@@ -65,7 +66,7 @@ class RoutePurpose:
         cache = self._cache[1]
         idx = (np.zeros(n, np.int64) if exits is None
                else np.asarray(obs.exit_index, dtype=np.int64).reshape(n))
-        keep = ((idx == 0) & self.humans_near(obs)) if exits is not None \
+        keep = ((idx == 0) & self.humans_near(obs)) if exits is not None and keep_clear \
             else np.zeros(n, bool)
         view = np.ones(n, np.int64)  # 0: off the entry strips, 1: on one, 2: strip only
         if entries is not None:
