@@ -608,12 +608,18 @@ def _headline_rows():
     row("bottleneck/cav95#1", **{"network.kind": "varying_width", "demand.inflow_vph": 7000.0,
         "demand.cav_share": 0.95, "bottleneck_kind": "width_drop", "bottleneck_active": True,
         "discharge_flow_vph": 4900.0, "edie_flow_vph": 4900.0, "discharge_stationary": True})
+    for seed, q in ((1, 4000.0), (2, 4200.0), (3, 4100.0)):
+        row(f"bottleneck/hdv_lc2013_3lanes#{seed}", seed=seed, **{
+            "network.kind": "three_lane", "demand.inflow_vph": 7000.0,
+            "demand.cav_share": 0.0, "bottleneck_kind": "obstacle",
+            "bottleneck_active": True, "discharge_flow_vph": q, "edie_flow_vph": q,
+            "discharge_stationary": True})
     for seed in (1, 2):
         row(f"bottleneck/hdv_sl2015#{seed}", seed=seed, **{
             "network.kind": "varying_width", "demand.inflow_vph": 7000.0,
             "demand.cav_share": 0.0, "bottleneck_kind": "width_drop", "edie_flow_vph": 1500.0,
             "entrance_limited": seed == 2,
-            "capacity_note": "bottleneck never active (no queue upstream with free flow "
+            "capacity_note": "bottleneck never active (no queue upstream with unqueued flow "
                              "downstream)"})
     for share, flows in ((0.0, (8000.0, 8100.0, 8200.0)), (0.95, (9000.0, 9400.0, 9800.0)),
                          (1.0, (12000.0, 12100.0, 12200.0))):
@@ -690,6 +696,15 @@ def test_headline_tables_beside_tum_with_losses_and_gains(headline_dir):
     bn_loss = loss.loc["bottleneck, queue discharge"]  # one 95 % run: no interval
     assert bn_loss["loss"] == pytest.approx(1 - 4900.0 / 5200.0)
     assert math.isnan(bn_loss["ci_low"])
+    vs = t["headline_bottleneck_gain"].set_index("arm")
+    lanes = vs.loc["bottleneck/hdv_lc2013_3lanes"]
+    assert lanes["gain"] == pytest.approx(5200.0 / 4100.0 - 1) and lanes["separated"]
+    va, vb = 200.0 ** 2 / 3, 100.0 ** 2 / 3  # Welch: variances of the means, dof
+    half = stats.t.ppf(0.975, (va + vb) ** 2 / (va ** 2 / 2 + vb ** 2 / 2)) * math.sqrt(va + vb)
+    assert lanes["ci_low"] == pytest.approx((1100.0 - half) / 4100.0, rel=1e-6)
+    assert (lanes["n_lanefree"], lanes["n_arm"]) == (3, 3)
+    assert vs.loc["bottleneck/hdv_sl2015", "n_arm"] == 0  # never active: no value
+    assert math.isnan(vs.loc["bottleneck/hdv_sl2015", "gain"])
     gain = t["headline_lanefree_gain"].set_index("ring_density_vpkm")
     assert gain.loc[125.0, "gain_vs_fixed4"] == pytest.approx(1 / 1.25 - 1)
     assert gain.loc[225.0, "gain_vs_rows3"] == pytest.approx(1 / 0.95 - 1)
@@ -701,6 +716,7 @@ def test_analyse_writes_the_headline_report_and_figures(headline_dir):
     md = (a.out_dir / "headline.md").read_text()
     for title in ("Road-limited capacity", "TUM LaneFreeDrive's ring",
                   "Capacity loss with 5 % human drivers", "Lane-free gain at equal time gap",
+                  "Lane-free CAVs against the other arms at the bottleneck",
                   "Ring fundamental diagram"):
         assert f"## {title}" in md
     assert "| lane-free flocking CAVs, T = 0.6 s | 5 200 |" in md and "| 0 / 0 |" in md

@@ -739,13 +739,18 @@ def test_a_sweep_of_two_kinds_fills_each_kinds_parameter_column(tmp_path, sumo_e
 def test_the_headline_sweep_is_fair_stationary_and_small_enough():
     """`cosim sweep headline`: named PART/ARM#RUN runs; the SUMO-free road world only
     without human drivers; ring runs stationary by design (>= 300 s warm-up, >= 600 s
-    measured); TUM's ring set-up; equal vehicles and desired speeds in every arm; the
-    three time gaps for the CAV arms; a smoke form of a few short runs."""
+    measured); the bottleneck arms at one taper (the lane arm: a closed lane), queued from
+    t = 0 by a standing queue upstream, 900 s measured, 5 seeds; TUM's ring set-up; equal
+    vehicles and desired speeds in every arm; the three time gaps for the CAV arms; a
+    smoke form of a few short runs."""
     full = sw.load_sweep("headline")
     smoke = sw.load_sweep("headline", smoke=True)
-    assert len(full.points) == 57 and len(smoke.points) == 4
+    assert len(full.points) == 67 and len(smoke.points) == 4
     parts = Counter(p.variant.split("/")[0] for p in full.points)
-    assert parts == {"bottleneck": 15, "tum_ring": 24, "ring_fd": 18}
+    assert parts == {"bottleneck": 25, "tum_ring": 24, "ring_fd": 18}
+    arms = Counter(p.variant.split("#")[0] for p in full.points
+                   if p.variant.startswith("bottleneck"))
+    assert set(arms.values()) == {5} and len(arms) == 5
     for p in full.points + smoke.points:
         sc, part = p.scenario, p.variant.split("/")[0]
         assert "#" in p.variant
@@ -770,7 +775,12 @@ def test_the_headline_sweep_is_fair_stationary_and_small_enough():
                 600.0, -3.4, 900.0)
         elif part == "bottleneck":
             assert sc.scenario.world == "sumo" and sc.network.kind == "varying_width"
-            assert sc.network.width_profile == ((600.0, 10.2), (300.0, 6.8))
+            widths = [w for _, w in sc.network.width_profile]
+            assert widths[0] == 10.2 and widths[-1] == 6.8 and widths == sorted(widths)[::-1]
+            assert sc.network.width_profile[0][0] == 520.0  # the taper starts at 520 m
+        if part == "bottleneck":
+            assert sc.demand.queue_vpkm == 200.0 and sc.demand.queue_span_m[0] == 200.0
+            assert sc.scenario.duration_s - sc.scenario.warmup_s >= 900.0
     shares = Counter(p.scenario.demand.cav_share for p in full.points
                      if p.variant.startswith("tum_ring"))
     assert shares == {s: 3 for s in (0.0, 0.1, 0.2, 0.5, 0.9, 0.95, 0.99, 1.0)}

@@ -295,15 +295,46 @@ def hdv5_losses(res: SweepResults, confidence: float = 0.95) -> pd.DataFrame:
                          **capacity_loss(full, mixed, confidence)})
     bn = _part(res, "bottleneck")
     if len(bn):
-        valid = bn["bottleneck_active"].astype("boolean").fillna(False).astype(bool)
-        valid &= ~bn["entrance_limited"].astype("boolean").fillna(False).astype(bool)
-        full = _num(bn[valid & (bn["arm"] == "bottleneck/lanefree")],
-                    "discharge_flow_vph").tolist()
-        mixed = _num(bn[valid & (bn["arm"] == "bottleneck/cav95")],
-                     "discharge_flow_vph").tolist()
+        full = _valid_discharges(bn, "bottleneck/lanefree")
+        mixed = _valid_discharges(bn, "bottleneck/cav95")
         if (bn["arm"] == "bottleneck/cav95").any():
             rows.append({"where": "bottleneck, queue discharge",
                          **capacity_loss(full, mixed, confidence)})
+    return pd.DataFrame(rows)
+
+
+def _valid_discharges(bn: pd.DataFrame, arm: str) -> list[float]:
+    """Queue discharges (veh/h) of ``arm``'s valid runs (bottleneck active, not
+    entrance-limited)."""
+    valid = bn["bottleneck_active"].astype("boolean").fillna(False).astype(bool)
+    valid &= ~bn["entrance_limited"].astype("boolean").fillna(False).astype(bool)
+    return _num(bn[valid & (bn["arm"] == arm)], "discharge_flow_vph").tolist()
+
+
+def bottleneck_gains(res: SweepResults, confidence: float = 0.95) -> pd.DataFrame:
+    """Lane-free CAVs against every other bottleneck arm at the same bottleneck:
+    ``gain = mean(lane-free) / mean(arm) - 1`` over the valid runs of each, with the
+    Welch interval of :func:`capacity_loss` (of the difference of the means, over the
+    arm's mean).
+
+    Columns: ``arm``, ``label``, ``gain``, ``ci_low``, ``ci_high``, ``n_lanefree``,
+    ``n_arm``, ``separated`` (the interval excludes 0).
+    """
+    import pandas as pd
+
+    bn = _part(res, "bottleneck")
+    rows = []
+    if not len(bn) or not (bn["arm"] == "bottleneck/lanefree").any():
+        return pd.DataFrame(rows)
+    lanefree = _valid_discharges(bn, "bottleneck/lanefree")
+    for arm, g in bn.groupby("arm", sort=False):
+        if arm == "bottleneck/lanefree":
+            continue
+        c = capacity_loss(_valid_discharges(bn, arm), lanefree, confidence)
+        rows.append({"arm": arm, "label": _arm_label(arm, g), "gain": -c["loss"],
+                     "ci_low": -c["ci_high"], "ci_high": -c["ci_low"],
+                     "n_lanefree": c["n_mixed"], "n_arm": c["n_full"],
+                     "separated": c["separated"]})
     return pd.DataFrame(rows)
 
 
@@ -312,6 +343,7 @@ def headline_tables(res: SweepResults, confidence: float = 0.95) -> dict[str, pd
     fd = ring_fd_table(res)
     return {
         "headline_bottleneck": bottleneck_table(res, confidence),
+        "headline_bottleneck_gain": bottleneck_gains(res, confidence),
         "headline_tum_ring": tum_ring_table(res, confidence),
         "headline_ring_fd": fd,
         "headline_lanefree_gain": lanefree_gain_table(fd),
@@ -381,7 +413,7 @@ def headline_markdown(tables: dict[str, pd.DataFrame], confidence: float = 0.95,
         lines += [
             "## Road-limited capacity: queue discharge at a bottleneck", "",
             "Slope of the N-curves at three cross-sections downstream of the bottleneck "
-            "while it is active (queue upstream, free flow downstream; Cassidy & Bertini "
+            "while it is active (queue upstream, unqueued flow downstream; Cassidy & Bertini "
             f"1999), mean over the valid runs with the {conf} t-interval. *valid*: "
             "bottleneck active and not entrance-limited; *stationary*: discharge drift "
             "< 2 % between the window's halves.", ""]
@@ -393,6 +425,22 @@ def headline_markdown(tables: dict[str, pd.DataFrame], confidence: float = 0.95,
                          *_comfort_cells(r), r["why_rejected"] or ""])
         lines += _table(("arm", "capacity (veh/h)", f"{conf} CI", "valid", "stationary",
                          *COMFORT_HEAD, "why rejected"), rows)
+    gains = tables.get("headline_bottleneck_gain")
+    if gains is not None and not gains.empty:
+        lines += [
+            "## Lane-free CAVs against the other arms at the bottleneck", "",
+            "gain = mean discharge of the lane-free CAVs / the arm's - 1 over the valid runs "
+            f"of each, Welch {conf} interval (of the difference of the means, over the arm's "
+            "mean).", ""]
+        rows = []
+        for _, r in gains.iterrows():
+            rows.append([r["label"], _pct(r["gain"]),
+                         (f"{_pct(r['ci_low'])} to {_pct(r['ci_high'])}"
+                          if math.isfinite(r["ci_low"]) else "-"),
+                         f"{int(r['n_lanefree'])} / {int(r['n_arm'])}",
+                         "yes" if r["separated"] else "no"])
+        lines += _table(("against", "gain", f"{conf} CI", "valid runs lane-free / arm",
+                         "separated from 0"), rows)
     tum = tables["headline_tum_ring"]
     if not tum.empty:
         lines += [

@@ -67,10 +67,25 @@ def check_scenario(sc: Scenario) -> None:
                       else min(widths) if widths else None)
         _check_obstacle(sc, length, road_width)
     _check_obstacle_joints(sc)
+    _check_queue(sc, length)
     if sc.scenario.world != "sumo" and sc.demand.human_model != "sl2015":
         raise ConfigError(f"demand.human_model={sc.demand.human_model!r} is a model of SUMO's "
                           f"drivers: it needs scenario.world = \"sumo\" (got "
                           f"{sc.scenario.world!r})")
+
+
+def _check_queue(sc: Scenario, length_m: float | None) -> None:
+    """A standing queue (``demand.queue_vpkm``) needs an open road that holds its span."""
+    demand = sc.demand
+    if demand.queue_vpkm <= 0:
+        return
+    if sc.network.kind == "ring":
+        raise ConfigError("demand.queue_vpkm is for open roads (a ring's density is "
+                          "demand.ring_density_vpkm)")
+    end = demand.queue_span_m[1]
+    if length_m is not None and end > length_m:
+        raise ConfigError(f"demand.queue_span_m ends at {end:g} m, beyond the {length_m:g} m "
+                          f"road")
 
 
 def check_sections(sc: Scenario) -> None:

@@ -12,6 +12,8 @@ route file (:mod:`cosim.demand.routes`) and the SUMO-free road world
   in lateral slots (``insertion = "slots"``) or at random lateral positions.
 * Rings: ``round(density x length)`` vehicles placed at t = 0, evenly staggered over
   the width or at random without overlaps.
+* A standing queue (open roads, ``demand.queue_vpkm``): ``round(density x span)``
+  vehicles placed at t = 0 at standstill in rows across the road (:func:`_queue_vehicles`).
 """
 
 from __future__ import annotations
@@ -63,6 +65,7 @@ class _Vehicle:
     centre_s_m: float | None = None  # ring: centre position at t = 0, m (None: road start)
     v0_mps: float | None = None  # departure speed, m/s (None: the desired speed)
     destination: str = "main"  # "main" (the road's end) or an off-ramp ("off", "off2"...)
+    depart_edge: int | None = None  # index of the departure edge in the route (None: first)
 
 
 #: Exponential headways are drawn in chunks of this many (any horizon draws the same
@@ -73,6 +76,9 @@ KIND_BLOCK = 20
 #: Independent random streams of an open-road origin (each its own generator).
 _STREAMS = ("arrivals", "kinds", "classes", "speeds", "lateral", "lanes", "ramp_lateral",
             "destinations")
+#: The ``SeedSequence`` origin number of the standing queue (:func:`_queue_vehicles`), far
+#: from the on-ramps' (1, 2, ...).
+QUEUE_STREAM = 1000
 
 
 def arrival_times(
@@ -485,6 +491,84 @@ def _ring_vehicles(net: RoadNetwork, demand: DemandSpec, rng: np.random.Generato
     return out
 
 
+def _queue_rows(net: RoadNetwork, span: tuple[float, float], max_width: float):
+    """``(centres, row_width, lanes)``: row centres ``d`` (m) across the queue's span,
+    each row's width (m) and whether the rows are lanes: a lane network's lanes (SUMO's
+    lane 0 on the right), else as many rows as fit (:func:`_ring_slots`) on the narrowest
+    part of the span, between its edges."""
+    s = np.linspace(span[0], span[1], 64)
+    right, left = net.edges_at(s)
+    lo, hi = float(np.max(right)), float(np.min(left))
+    m = net.n_lanes if net.n_lanes > 1 else _ring_slots(hi - lo, max_width)
+    row_w = (hi - lo) / m
+    return lo + (np.arange(m) + 0.5) * row_w, row_w, net.n_lanes > 1
+
+
+def _queue_vehicles(net: RoadNetwork, demand: DemandSpec, seed: int) -> list[_Vehicle]:
+    """The standing queue at t = 0 (``demand.queue_vpkm`` veh/km over
+    ``demand.queue_span_m``): ``n = round(density x span)`` vehicles at 0 m/s, the rows
+    (:func:`_queue_rows`) taken in turn from the head; row ``r`` of ``m`` holds its ``n_r``
+    vehicles at a pitch ``p = span / (n_r + (m - 1) / m)`` (front to front, m), its first
+    front ``r p / m`` behind the span's end (the rows staggered), so every body lies in the
+    span. Refused (ConfigError) when a pitch leaves less than RING_MIN_GAP_M behind the
+    longest car. Kinds, sizes and desired speeds from their own generators
+    (``SeedSequence([seed, QUEUE_STREAM, q])``); lateral jitter within each row's room as
+    on a ring. Every vehicle drives to the road's end."""
+    if demand.queue_vpkm <= 0:
+        return []
+    if net.periodic:
+        raise ConfigError("demand.queue_vpkm is for open roads (a ring's density is "
+                          "demand.ring_density_vpkm)")
+    start, end = (float(x) for x in demand.queue_span_m)
+    if end > net.length_m:
+        raise ConfigError(f"demand.queue_span_m = ({start:g}, {end:g}) ends beyond the "
+                          f"road ({net.length_m:.0f} m)")
+    span = end - start
+    n = int(round(demand.queue_vpkm * span / 1000.0))
+    if n < 1:
+        return []
+    g = {name: np.random.default_rng(np.random.SeedSequence([seed, QUEUE_STREAM, q]))
+         for q, name in enumerate(_STREAMS)}
+    is_cav, cls, speed = _draw_common(n, demand, g["kinds"], g)
+    lengths = np.array([demand.size_classes[c][0] for c in cls])
+    widths = np.array([demand.size_classes[c][1] for c in cls])
+    widest = max(c[1] for c in demand.size_classes)
+    centres, row_w, lanes = _queue_rows(net, (start, end), widest)
+    m = len(centres)
+    rows = np.arange(n) % m
+    per_row = np.bincount(rows, minlength=m)
+    pitch = span / (per_row[rows] + (m - 1) / m)
+    longest = max(c[0] for c in demand.size_classes)
+    if float(pitch.min()) < longest + RING_MIN_GAP_M:
+        most = m * math.floor(span / (longest + RING_MIN_GAP_M) - (m - 1) / m)
+        raise ConfigError(
+            f"demand.queue_vpkm={demand.queue_vpkm:g} does not fit on {span:g} m: {m} rows, "
+            f"each car {longest + RING_MIN_GAP_M:g} m (longest car + {RING_MIN_GAP_M:g} m "
+            f"gap) from the next, hold at most {1000.0 * most / span:.0f} veh/km")
+    front = end - pitch * (np.arange(n) // m + rows / m)
+    d = centres[rows]
+    if not lanes:
+        room = np.maximum(0.5 * (row_w - widths - MIN_GAP_LAT_M), 0.0)
+        d = d + g["lateral"].uniform(-1.0, 1.0, size=n) * room
+    route = route_id("main", "main")
+    od_route = getattr(net, "od_route", None)  # SUMO's edges (the road world has one)
+    main_edges = od_route("main", "main") if od_route is not None else ("road",)
+    out = []
+    for i in range(n):
+        edge, pos = net.locate(float(front[i]))
+        kind = CAV_PREFIX if is_cav[i] else HDV_PREFIX
+        out.append(_Vehicle(
+            vid=f"{kind}.queue.{i}", vtype=f"{kind}_{cls[i]}", route=route, depart=0.0,
+            speed=float(speed[i]), factor=float(speed[i]) / net.speed_limit_mps,
+            depart_pos=f"{pos:.3f}", depart_lat=None if lanes else f"{d[i]:.3f}",
+            depart_lane=str(rows[i]) if lanes else "0", depart_speed="0",
+            insertion_checks="none", is_cav=bool(is_cav[i]), length_m=float(lengths[i]),
+            width_m=float(widths[i]), lat_m=float(d[i]),
+            centre_s_m=float(front[i] - 0.5 * lengths[i]), v0_mps=0.0,
+            depart_edge=main_edges.index(edge)))
+    return out
+
+
 @dataclass(frozen=True)
 class DemandPlan:
     """Every vehicle of a run and how they arrive.
@@ -507,6 +591,7 @@ def plan_vehicles(net: RoadNetwork, demand: DemandSpec, seed: int, horizon_s: fl
     open roads: a longer horizon keeps every vehicle of a shorter one (same id, kind,
     size, desired speed, departure) and appends the rest.
     """
+    queue = _queue_vehicles(net, demand, seed)  # ConfigError on a ring
     if net.periodic:
         vehicles = _ring_vehicles(net, demand, np.random.default_rng(seed))
         return DemandPlan(vehicles, "ring_initial", ring_route_repeat(net, horizon_s))
@@ -518,8 +603,8 @@ def plan_vehicles(net: RoadNetwork, demand: DemandSpec, seed: int, horizon_s: fl
         elif q > 0 and (origin, dest) != ("main", "main"):
             raise ConfigError(f"demand.od_vph: {origin!r} -> {dest!r} needs a SUMO network "
                               f"with {'an on-ramp' if origin != 'main' else 'an off-ramp'}")
-    vehicles = _open_stream(net, demand, seed, "main", flows.get("main", {}),
-                            float(net.width_at(0)), horizon_s)
+    vehicles = queue + _open_stream(net, demand, seed, "main", flows.get("main", {}),
+                             float(net.width_at(0)), horizon_s)
     for ramp in getattr(net, "ramps", ()):
         if sum(flows.get(ramp.name, {}).values()) > 0:
             vehicles += _open_stream(net, demand, seed, ramp.name, flows[ramp.name],

@@ -207,9 +207,10 @@ def _route_lines(net: RoadNetwork, repeat: int | None) -> list[str]:
 def _vehicle_line(v: _Vehicle) -> str:
     lat = f' departPosLat="{v.depart_lat}"' if v.depart_lat is not None else ""
     checks = f' insertionChecks="{v.insertion_checks}"' if v.insertion_checks else ""
+    edge = f' departEdge="{v.depart_edge}"' if v.depart_edge else ""
     return (
         f"    <vehicle id={quoteattr(v.vid)} type=\"{v.vtype}\" route=\"{v.route}\" "
-        f'depart="{v.depart:.2f}" departLane="{v.depart_lane}" departPos="{v.depart_pos}"'
+        f'depart="{v.depart:.2f}"{edge} departLane="{v.depart_lane}" departPos="{v.depart_pos}"'
         f'{lat} departSpeed="{v.depart_speed}" speedFactor="{v.factor:.6f}"{checks}>\n'
         f'        <param key="desiredSpeed" value="{v.speed:.4f}"/>\n'
         f"    </vehicle>"

@@ -206,6 +206,14 @@ class DemandSpec:
             rows from ``"main"``) and ``ramp_inflow_vph`` (from ``"ramp"``): each
             origin's arrivals are one stream of its rows' total flow,
             each vehicle drawn a destination in proportion to its origin's rows.
+        queue_vpkm: open roads: a standing queue placed at t = 0 over ``queue_span_m``,
+            veh/km (0: none). Its vehicles stand still in rows across the road (lanes on
+            a lane network), at least RING_MIN_GAP_M apart, kinds, sizes and desired
+            speeds drawn as the arrivals' (``cav_share``), ids ``<kind>.queue.<n>`` from
+            the queue's head; they drive to the road's end. It makes a bottleneck active
+            from the start when the entrance alone cannot queue it (a road-limited
+            capacity needs a queue upstream for the whole measured window).
+        queue_span_m: where that queue stands, ``(start_m, end_m)`` along the road, m.
         human_model: the human drivers (:mod:`cosim.demand.humans`): ``"sl2015"``
             (SUMO's drivers, calibrated: the ``HDV_*`` constants below) or TUM
             LaneFreeDrive's ``StripBasedHuman`` with the constants of their TRB 2024
@@ -229,6 +237,8 @@ class DemandSpec:
     slot_spacing_m: float = 2.55
     od_vph: tuple[tuple[str, str, float], ...] = ()
     human_model: str = "sl2015"
+    queue_vpkm: float = 0.0
+    queue_span_m: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "desired_speed_mps", tuple(self.desired_speed_mps))
@@ -236,6 +246,7 @@ class DemandSpec:
             self, "size_classes", tuple(tuple(float(v) for v in c) for c in self.size_classes)
         )
         object.__setattr__(self, "od_vph", tuple(tuple(r) for r in self.od_vph))
+        object.__setattr__(self, "queue_span_m", tuple(self.queue_span_m))
         self.validate()
 
     def validate(self) -> None:
@@ -261,6 +272,17 @@ class DemandSpec:
             raise ConfigError(f"demand.slot_spacing_m must be > 0 (got {self.slot_spacing_m})")
         self._validate_od()
         _choice("human_model", self.human_model, HUMAN_MODELS)
+        self._validate_queue()
+
+    def _validate_queue(self) -> None:
+        _finite_nonneg("queue_vpkm", self.queue_vpkm)
+        span = self.queue_span_m
+        if len(span) != 2 or not all(isinstance(x, int | float) and math.isfinite(x)
+                                     for x in span):
+            raise ConfigError(f"demand.queue_span_m must be (start_m, end_m) (got {span!r})")
+        if self.queue_vpkm > 0 and not 0.0 <= span[0] < span[1]:
+            raise ConfigError(f"demand.queue_span_m must satisfy 0 <= start_m < end_m when "
+                              f"demand.queue_vpkm > 0 (got {span!r})")
 
     def _validate_od(self) -> None:
         seen = set()

@@ -209,8 +209,9 @@ def _run_in(sc: Scenario, work: Path, gui: bool, progress, hooks) -> RunResult:
     layout = capacity_layout(sc, world.road, net)
     ramps = sum(sc.demand.total_vph(r.name) for r in getattr(net, "ramps", ()))
     demand = 0.0 if net.periodic else sc.demand.total_vph("main") + ramps
+    queued = sum(1 for v in plan.vehicles if v.vid.split(".")[1] == "queue")
     caprec = CapacityRecorder(run.step_length_s, layout, run.warmup_s, run.duration_s,
-                              demand_vph=demand)
+                              demand_vph=demand, preloaded=queued)
     every = sc.outputs.trajectory_every if sc.outputs.trajectories else 0
     rec = attach_recorders(loop, traffic, jams, warmup_s=run.warmup_s, trajectories_every=every,
                            capacity=caprec)
