@@ -513,7 +513,8 @@ def _queue_vehicles(net: RoadNetwork, demand: DemandSpec, seed: int) -> list[_Ve
     span. Refused (ConfigError) when a pitch leaves less than RING_MIN_GAP_M behind the
     longest car. Kinds, sizes and desired speeds from their own generators
     (``SeedSequence([seed, QUEUE_STREAM, q])``); lateral jitter within each row's room as
-    on a ring. Every vehicle drives to the road's end."""
+    on a ring. Every vehicle drives to the road's end. A vehicle whose front would stand
+    inside a junction (between two edges of a SUMO network) is left out."""
     if demand.queue_vpkm <= 0:
         return []
     if net.periodic:
@@ -553,8 +554,11 @@ def _queue_vehicles(net: RoadNetwork, demand: DemandSpec, seed: int) -> list[_Ve
     route = route_id("main", "main")
     od_route = getattr(net, "od_route", None)  # SUMO's edges (the road world has one)
     main_edges = od_route("main", "main") if od_route is not None else ("road",)
+    spans = getattr(net, "edge_spans", ())
     out = []
     for i in range(n):
+        if spans and not any(s0 <= front[i] <= s1 for _, s0, s1 in spans):
+            continue  # its front inside a junction: SUMO places vehicles on edges only
         edge, pos = net.locate(float(front[i]))
         kind = CAV_PREFIX if is_cav[i] else HDV_PREFIX
         out.append(_Vehicle(
