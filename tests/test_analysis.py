@@ -593,6 +593,8 @@ def _headline_rows():
                 "min_ttc_s": 2.0, "tet_veh_s": 1.0, "measured_vehicle_s": 1000.0,
                 "harsh_accel_share_cav": 0.01, "harsh_accel_share_hdv": np.nan,
                 "safety_activations_per_cav_km": 0.5, "stationary": True,
+                "safety_edge_activations": 2, "safety_side_activations": 3,
+                "safety_speed_activations": 5, "safety_agent_steps": 1000,
                 "flow_drift": 0.005, "entrance_limited": False, "bottleneck_kind": "",
                 "bottleneck_active": False, "discharge_flow_vph": np.nan,
                 "discharge_stationary": False, "capacity_note": ""}
@@ -686,6 +688,7 @@ def test_headline_tables_beside_tum_with_losses_and_gains(headline_dir):
     assert bn.loc["bottleneck/lanefree", "label"] == "lane-free flocking CAVs, T = 0.6 s"
     assert bn.loc["bottleneck/hdv_sl2015", "label"] == "SL2015 drivers, lane-free"
     assert bn.loc["bottleneck/lanefree", "tet_share"] == pytest.approx(1e-3)
+    assert bn.loc["bottleneck/lanefree", "safety_share_cav_steps"] == pytest.approx(0.01)
     tum = t["headline_tum_ring"].set_index("cav_share")
     assert tum.loc[1.0, "tum_vph"] == 15504.0 and tum.loc[0.0, "tum_vph"] == 6613.0
     assert tum.loc[1.0, "ours_over_tum"] == pytest.approx(12100.0 / 15504.0)

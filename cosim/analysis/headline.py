@@ -82,7 +82,18 @@ def comfort_safety(g: pd.DataFrame) -> dict:
         "harsh_share_cav": mean("harsh_accel_share_cav"),
         "harsh_share_hdv": mean("harsh_accel_share_hdv"),
         "safety_per_cav_km": mean("safety_activations_per_cav_km"),
+        "safety_share_cav_steps": _activation_share(g),
     }
+
+
+def _activation_share(g: pd.DataFrame) -> float:
+    """Safety-layer activations (edge, side and speed rules) over the CAV-steps it saw, all
+    runs of ``g`` pooled: an upper bound of the share of CAV-steps with an intervention
+    (one step can count for several rules). NaN without CAV-steps."""
+    acts = sum(_num(g, f"safety_{r}_activations").fillna(0).sum()
+               for r in ("edge", "side", "speed"))
+    steps = _num(g, "safety_agent_steps").fillna(0).sum()
+    return float(acts / steps) if steps > 0 else math.nan
 
 
 def _arm_label(arm: str, g: pd.DataFrame) -> str:
@@ -390,11 +401,11 @@ def _comfort_cells(r) -> list[str]:
     return [f"{int(r['collisions_cav'])} / {int(r['collisions_hdv_only'])}", _ttc(r["min_ttc_s"]),
             _pct(r["tet_share"], 2),
             _pct(r["harsh_share_cav"], 2), _pct(r["harsh_share_hdv"], 2),
-            _n(r["safety_per_cav_km"], 2)]
+            _n(r["safety_per_cav_km"], 2), _pct(r["safety_share_cav_steps"], 2)]
 
 
 COMFORT_HEAD = ("collisions CAV / HDV-only", "min TTC (s)", "TET share", "harsh (CAV)",
-                "harsh (HDV)", "safety / CAV-km")
+                "harsh (HDV)", "safety / CAV-km", "safety / CAV-step")
 
 
 def _table(head, rows) -> list[str]:
@@ -505,7 +516,9 @@ def headline_markdown(tables: dict[str, pd.DataFrame], confidence: float = 0.95,
         "laterally overlapping leader; *TET share*: time spent with TTC <= 1.5 s over the "
         "vehicle-time (Minderhoud & Bovy 2001); *harsh*: share of CAV- / HDV-steps with "
         "|acceleration| > 3 m/s^2 after the warm-up; *safety / CAV-km*: safety-layer "
-        "activations (edge, side and speed rules, per CAV-step) per CAV-km driven.", ""]
+        "activations (edge, side and speed rules, per CAV-step) per CAV-km driven; "
+        "*safety / CAV-step*: the same activations over the CAV-steps (an upper bound of "
+        "the share of CAV-steps with an intervention).", ""]
     if figures:
         lines += ["## Figures", ""]
         lines += [f"![{f.rsplit('/', 1)[-1].removesuffix('.png')}]({f})" for f in figures]
