@@ -321,10 +321,12 @@ class OldCapacityRecorder:
         dt: step, s. layout: zones and cross-sections. warmup_s: start of the measured
         period, s. duration_s: length of the run, s. bin_s: bin length, s.
         demand_vph: the demand's mean arrival rate on open roads (main and ramp), veh/h.
+        preloaded: vehicles of a standing queue placed at t = 0 (not counted as inserted).
     """
 
     def __init__(self, dt: float, layout: cap.Layout, warmup_s: float, duration_s: float,
-                 bin_s: float = cap.BIN_S, demand_vph: float = 0.0) -> None:
+                 bin_s: float = cap.BIN_S, demand_vph: float = 0.0,
+                 preloaded: int = 0) -> None:
         self.dt = float(dt)
         self.layout = layout
         self.warmup_s = float(warmup_s)
@@ -336,7 +338,7 @@ class OldCapacityRecorder:
         self.pending = np.zeros(n_bins)
         self.inserted = np.zeros(n_bins)
         self.demand_vph = float(demand_vph)
-        self._n_inserted = 0
+        self._n_inserted = -int(preloaded)
         self.xs = np.asarray(layout.sections_m, dtype=float)
         self._crossings: list[list[float]] = [[] for _ in self.xs]
         self._pending_every = max(1, int(round(PENDING_SAMPLE_S / dt)))
@@ -652,6 +654,9 @@ RUNS = {
     "varying_width_trajectories": ("varying_width", {
         "scenario.duration_s": 60.0, "scenario.warmup_s": 10.0, "demand.inflow_vph": 7000.0,
         "outputs.trajectories": True}),
+    "varying_width_standing_queue": ("varying_width", {
+        "scenario.duration_s": 60.0, "scenario.warmup_s": 10.0, "demand.inflow_vph": 4000.0,
+        "demand.queue_vpkm": 150.0, "demand.queue_span_m": [50.0, 250.0]}),
 }
 
 
