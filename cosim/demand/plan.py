@@ -608,7 +608,7 @@ def plan_vehicles(net: RoadNetwork, demand: DemandSpec, seed: int, horizon_s: fl
             raise ConfigError(f"demand.od_vph: {origin!r} -> {dest!r} needs a SUMO network "
                               f"with {'an on-ramp' if origin != 'main' else 'an off-ramp'}")
     vehicles = queue + _open_stream(net, demand, seed, "main", flows.get("main", {}),
-                             float(net.width_at(0)), horizon_s)
+                                    float(net.width_at(0)), horizon_s)
     for ramp in getattr(net, "ramps", ()):
         if sum(flows.get(ramp.name, {}).values()) > 0:
             vehicles += _open_stream(net, demand, seed, ramp.name, flows[ramp.name],
