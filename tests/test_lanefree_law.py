@@ -244,6 +244,26 @@ def test_a_cav_yields_to_an_announced_mover_unless_it_would_brake_harshly():
     assert u[0, 0] < -p.yield_decel_mps2 and u[1, 0] > 0
 
 
+def test_a_mover_does_not_wait_for_a_human_driver_that_follows_it():
+    """A CAV at 1.1 m/s blocked by a stopped car 250 m ahead announces a move into the band
+    of a human driver 1.5 m behind it and 0.5 m beside it, as slow. SUMO's drivers follow
+    whatever shares a sublane with them (0.8 m): that driver follows the CAV and never
+    passes. Taking it for one that passes (``human_follow_margin_m = 0``), the CAV brakes
+    to let it by, and both crawl (TUM's protocol at 400 veh/km, 50 % CAVs, margins 0.5 s and
+    0.5 m: 1.1 m/s for good); with the default margin it goes on."""
+    u = {}
+    for hfm in (0.0, LaneFreeParams().human_follow_margin_m):
+        p = LaneFreeParams(order_gain=0.0, clear_gain=0.0, human_follow_margin_m=hfm)
+        law = LaneFreeFlocking(p, RoadContext(dt=DT))
+        obs = _obs([[100.0, -2.0]], [[1.1, 0.0]], [30.0], width=6.8,
+                   others_q=[[350.0, -2.0], [94.0, 0.3]], others_p=[[0.0, 0.0], [1.1, 0.0]])
+        law.compute(obs)  # the stopped car is seen standing: the band is blocked
+        u[hfm] = law.compute(Observation(**{**obs.__dict__, "t": DT}))[0, 0]
+        assert law._urgent["c0"]
+        assert abs(law._target["c0"] - 0.3) < 1.8 + p.follow_margin_m  # the driver's band
+    assert u[0.0] < 0 < u[LaneFreeParams().human_follow_margin_m]
+
+
 @pytest.mark.parametrize("bad", [
     {"time_gap_s": 0.0}, {"time_gap_s": float("nan")}, {"kp": -1.0}, {"ff_gain": 1.5},
     {"window": 1}, {"spacing_error_min_m": 1.0}, {"lat_gain": float("inf")},

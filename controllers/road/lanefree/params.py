@@ -83,6 +83,9 @@ class LaneFreeParams:
             long, then goes on for the cool-down, s (nothing waits forever).
         zipper_slack_m: a CAV closer behind a mover than ``side_buffer_m`` plus this cannot
             let it in (the mover needs that gap beside it) and goes on instead, m.
+        human_follow_margin_m: a human driver behind a mover within this lateral gap
+            follows the mover (SUMO's drivers follow whatever shares a sublane with them,
+            0.8 m in our calibration), so the mover does not wait for it to pass, m.
         window: neighbours in road order looked at on each side of a CAV.
         entry_reach_m: a vehicle outside the road within this distance of its edge (about
             to merge from an on-ramp) counts as on the road at its nearest inside
@@ -163,6 +166,7 @@ class LaneFreeParams:
     yield_timeout_s: float = 8.0
     yield_cooldown_s: float = 6.0
     zipper_slack_m: float = 0.3
+    human_follow_margin_m: float = 0.8
     yield_decel_mps2: float = 2.0
     window: int = 16
     entry_reach_m: float = 6.0
@@ -200,7 +204,7 @@ class LaneFreeParams:
                      "follow_margin_m", "lat_gain", "lat_damping", "lateral_clearance_m",
                      "edge_margin_m", "side_buffer_m", "side_buffer_s", "repulsion_gain",
                      "side_buffer_speed_s", "zipper_slack_m",
-                     "lookahead_min_m", "edge_lookahead_min_m",
+                     "human_follow_margin_m", "lookahead_min_m", "edge_lookahead_min_m",
                      "edge_lookahead_s", "scan_margin_m", "move_cost", "clear_gain",
                      "clear_cap_m", "nudge_gain", "hysteresis_mps", "order_gain",
                      "bias_speed_low_mps", "urgent_gain_mps", "bias_speed_high_mps",
