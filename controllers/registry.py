@@ -46,12 +46,17 @@ class RoadContext:
         limits: the run's actuator limits.
         comm: the seed 001 communication layer's config, or None.
         road: the road's edges along its length, or None.
+        human_follow_margin_m: the lateral gap within which the run's human drivers take a
+            vehicle ahead for their leader, m: SUMO's sublane width (its SL2015 drivers
+            follow whatever shares a sublane with them), 0 where they follow only a
+            vehicle that overlaps them (the road world's drivers, SUMO's on lanes).
     """
 
     dt: float
     limits: ActuatorLimits = field(default_factory=ActuatorLimits)
     comm: Any = None
     road: RoadProfile | None = None
+    human_follow_margin_m: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -260,6 +265,7 @@ def _load_builtins() -> None:
         params_type=lanefree.LaneFreeParams,
         defaults={},
         build=lambda p, ctx: _with_comm(lanefree.LaneFreeFlocking(p, ctx), ctx),
+        run_fields={"human_follow_margin_m": "human_follow_margin_m"},
     ))
     register(LawEntry(
         kind="flocking_timegap",

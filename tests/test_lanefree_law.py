@@ -246,13 +246,14 @@ def test_a_cav_yields_to_an_announced_mover_unless_it_would_brake_harshly():
 
 def test_a_mover_does_not_wait_for_a_human_driver_that_follows_it():
     """A CAV at 1.1 m/s blocked by a stopped car 250 m ahead announces a move into the band
-    of a human driver 1.5 m behind it and 0.5 m beside it, as slow. SUMO's drivers follow
-    whatever shares a sublane with them (0.8 m): that driver follows the CAV and never
-    passes. Taking it for one that passes (``human_follow_margin_m = 0``), the CAV brakes
-    to let it by, and both crawl (TUM's protocol at 400 veh/km, 50 % CAVs, margins 0.5 s and
-    0.5 m: 1.1 m/s for good); with the default margin it goes on."""
+    of a human driver 1.5 m behind it and 0.5 m beside it, as slow. On SUMO's 0.8 m
+    sublanes that driver shares a sublane with the CAV, follows it and never passes
+    (``human_follow_margin_m`` = 0.8, set by the run). Taking it for one that passes (0: a
+    driver that follows only an overlapping vehicle), the CAV brakes to let it by, and both
+    crawl (TUM's protocol at 400 veh/km, 50 % CAVs, margins 0.5 s and 0.5 m: 1.1 m/s for
+    good); with the sublane's margin it goes on."""
     u = {}
-    for hfm in (0.0, LaneFreeParams().human_follow_margin_m):
+    for hfm in (0.0, 0.8):
         p = LaneFreeParams(order_gain=0.0, clear_gain=0.0, human_follow_margin_m=hfm)
         law = LaneFreeFlocking(p, RoadContext(dt=DT))
         obs = _obs([[100.0, -2.0]], [[1.1, 0.0]], [30.0], width=6.8,
@@ -261,7 +262,28 @@ def test_a_mover_does_not_wait_for_a_human_driver_that_follows_it():
         u[hfm] = law.compute(Observation(**{**obs.__dict__, "t": DT}))[0, 0]
         assert law._urgent["c0"]
         assert abs(law._target["c0"] - 0.3) < 1.8 + p.follow_margin_m  # the driver's band
-    assert u[0.0] < 0 < u[LaneFreeParams().human_follow_margin_m]
+    assert u[0.0] < 0 < u[0.8]
+
+
+def test_the_human_follow_margin_comes_from_the_run():
+    """The world's sublane width reaches the law (SUMO's drivers follow whatever shares a
+    sublane); a scenario cannot set it, and a world without sublanes gives 0."""
+    from controllers import registry
+    from cosim.errors import ConfigError
+    from cosim.sim.runner import human_follow_margin_m
+
+    law = registry.build("flocking", LaneFreeParams(),
+                         RoadContext(dt=DT, human_follow_margin_m=0.2))
+    assert law.params.human_follow_margin_m == 0.2
+    assert human_follow_margin_m(object()) == 0.0  # the road world: no sublanes
+
+    class Sumo:
+        lateral_resolution_m = 0.8
+    assert human_follow_margin_m(Sumo()) == 0.8
+    Sumo.lateral_resolution_m = None  # lanes
+    assert human_follow_margin_m(Sumo()) == 0.0
+    with pytest.raises(ConfigError, match="human_follow_margin_m"):
+        load_scenario("ring", {"controller.params.human_follow_margin_m": 0.8})
 
 
 @pytest.mark.parametrize("bad", [

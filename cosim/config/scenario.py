@@ -97,10 +97,13 @@ class Scenario:
             out["controller"]["params"] = plain(self.controller.resolved_params())
         return out
 
-    def law_context(self, road=None) -> registry.RoadContext:
-        """What the law's factory gets from this run."""
+    def law_context(self, road=None, human_follow_margin_m: float = 0.0
+                    ) -> registry.RoadContext:
+        """What the law's factory gets from this run (``human_follow_margin_m``: the
+        world's, m; :class:`controllers.registry.RoadContext`)."""
         return registry.RoadContext(dt=self.scenario.step_length_s, limits=self.limits,
-                                    comm=self.controller.comm_config(), road=road)
+                                    comm=self.controller.comm_config(), road=road,
+                                    human_follow_margin_m=human_follow_margin_m)
 
 
 def scenario_from_dict(data: Mapping[str, Any], base: Scenario | None = None) -> Scenario:

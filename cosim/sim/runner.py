@@ -120,6 +120,14 @@ def _relative_paths(meta: dict, work: Path) -> dict:
     return json.loads(json.dumps(meta, default=str).replace(prefix, ""))
 
 
+def human_follow_margin_m(world) -> float:
+    """The lateral gap (m) within which ``world``'s human drivers take a vehicle ahead for
+    their leader: SUMO's sublane width on a lane-free road, 0 on lanes and in the road
+    world (they follow only a vehicle that overlaps them)."""
+    resolution = getattr(world, "lateral_resolution_m", None)
+    return 0.0 if resolution is None else float(resolution)
+
+
 def build_world(sc: Scenario, work: Path, gui: bool = False):
     """The world of ``sc`` and what the runner needs of it: (world, net, plan, detectors)."""
     from cosim.demand.plan import plan_vehicles
@@ -193,7 +201,7 @@ def _run_in(sc: Scenario, work: Path, gui: bool, progress, hooks) -> RunResult:
     period = net.length_m if net.periodic else None
     try:
         law = registry.build(sc.controller.kind, sc.controller.law_params(),
-                             sc.law_context(world.road))
+                             sc.law_context(world.road, human_follow_margin_m(world)))
     except registry.LawError as exc:
         raise ConfigError(str(exc)) from None
     safety = None

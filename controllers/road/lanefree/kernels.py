@@ -532,11 +532,11 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
                         # behind passes nobody (the mover would wait for it forever);
                         # nor does one that follows the mover already (the mover is in
                         # its band: a CAV within the follow margin, a human driver within
-                        # ``human_follow_margin_m``: SUMO's drivers follow whatever shares
-                        # a sublane with them): in a dense file both would wait for the
-                        # other and the whole file crawl (a ring at 400 veh/km with a
-                        # 0.5 m standstill gap: 1.1 m/s for good, with CAVs alone and
-                        # with human drivers)
+                        # ``human_follow_margin_m``, the run's: SUMO's drivers follow
+                        # whatever shares a sublane with them): in a dense file both would
+                        # wait for the other and the whole file crawl (a ring at 400 veh/km
+                        # with a 0.5 m standstill gap: 1.1 m/s for good, with CAVs alone
+                        # and with human drivers)
                         follows_mover = abs(ddk) - half_w < (P[FM] if j_cav else P[HFM])
                         passes = ((u_let < -P[YD]) or (g_back < P[ZG])) and (
                             v_j > ZIPPER_MOVING_MPS) and not follows_mover

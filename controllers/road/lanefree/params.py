@@ -84,8 +84,10 @@ class LaneFreeParams:
         zipper_slack_m: a CAV closer behind a mover than ``side_buffer_m`` plus this cannot
             let it in (the mover needs that gap beside it) and goes on instead, m.
         human_follow_margin_m: a human driver behind a mover within this lateral gap
-            follows the mover (SUMO's drivers follow whatever shares a sublane with them,
-            0.8 m in our calibration), so the mover does not wait for it to pass, m.
+            follows the mover, so the mover does not wait for it to pass, m. Set by the
+            run, not in ``[controller.params]``: SUMO's sublane width (its drivers follow
+            whatever shares a sublane with them: 0.8 m on a plain road, 0.2 m where it
+            narrows), 0 in the road world (its drivers follow only an overlapping vehicle).
         window: neighbours in road order looked at on each side of a CAV.
         entry_reach_m: a vehicle outside the road within this distance of its edge (about
             to merge from an on-ramp) counts as on the road at its nearest inside
@@ -166,7 +168,7 @@ class LaneFreeParams:
     yield_timeout_s: float = 8.0
     yield_cooldown_s: float = 6.0
     zipper_slack_m: float = 0.3
-    human_follow_margin_m: float = 0.8
+    human_follow_margin_m: float = 0.0
     yield_decel_mps2: float = 2.0
     window: int = 16
     entry_reach_m: float = 6.0
