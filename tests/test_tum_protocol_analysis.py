@@ -124,3 +124,17 @@ def test_a_density_with_an_extra_seed_weighs_as_one_density(protocol_dir):
     full = [np.mean([_flow(1.0, d, s) for d in DENSITIES]) for s in (1, 2, 3)]
     assert r["ci_high_vph"] - r["flow_vph"] == pytest.approx(
         4.302653 * np.std(full, ddof=1) / np.sqrt(3), rel=1e-4)
+
+
+def test_four_rows_at_tums_margins_give_tums_congested_branch():
+    """The independent expectation the docs set beside the runs: 4 rows at TUM's margins
+    (T 0.5 s, no standstill gap) land within 4 % of TUM's figure at 250-400 veh/km; at our
+    default margins (T 0.6 s, 2.5 m) they give 8 280 veh/h at 400 veh/km, and TUM's
+    margins in 3 rows would fall short of TUM at every congested density."""
+    for k in (250.0, 300.0, 350.0, 400.0):
+        tum = tp._tum_at(1.0, k)
+        four = tp.rows_equilibrium_flow_vph(k, 4, 0.5, 0.0)
+        assert abs(four / tum - 1) < 0.04
+        assert tp.rows_equilibrium_flow_vph(k, 3, 0.5, 0.0) < 0.9 * tum
+    assert round(tp.rows_equilibrium_flow_vph(400.0, 4, 0.6, 2.5)) == 8280
+    assert tp.rows_equilibrium_flow_vph(50.0, 4, 0.5, 0.0, free_speed_mps=30.0) == 5400.0
