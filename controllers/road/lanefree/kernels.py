@@ -32,7 +32,7 @@ NAMES = (
     "lookahead_min_m", "scan_margin_m", "scan_time_gap_s", "move_cost", "clear_gain",
     "clear_cap_m", "nudge_gain", "order_gain", "urgent_gain_mps", "queue_speed_mps",
     "bias_speed_low_mps", "coop_time_gap_s", "yield_decel_mps2", "comfort_decel_mps2",
-    "congested_hysteresis_mps", "human_follow_margin_m",
+    "congested_hysteresis_mps", "human_follow_margin_m", "mover_skips_followers",
     # derived (folded as the numpy code folded them)
     "bias_span", "app_bt2", "app_mbt", "app_2b", "scan_2b", "lat_2a", "two_lc",
     "zipper_gap", "long_min", "long_max", "lat_speed_max", "em_bt2", "em_mbt", "em_2b",
@@ -40,7 +40,7 @@ NAMES = (
 )
 (TG, TGH, S0, KP, KD, KFF, KPH, KDH, KV, KA, EMIN, EMAX, ANT, FM, KY, CY, LC, EM, SB, SBV,
  SBT, CIM, CIG, RG, LAS, LAM, SCM, SCT, MC, CG, CC, NG, OG, UG, QS, BL, CT, YD, CB, CH, HFM,
- BSPAN,
+ MSF, BSPAN,
  ABT2, AMBT, A2B, SC2B, L2A, TWOLC, ZG, LMIN, LMAX, VMAX, EBT2, EMBT, E2B, SHC, DT) = range(
     len(NAMES))
 
@@ -537,7 +537,9 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
                         # wait for the other and the whole file crawl (a ring at 400 veh/km
                         # with a 0.5 m standstill gap: 1.1 m/s for good, with CAVs alone
                         # and with human drivers)
-                        follows_mover = abs(ddk) - half_w < (P[FM] if j_cav else P[HFM])
+                        # (``mover_skips_followers``; off by default, see its doc)
+                        follows_mover = P[MSF] > 0 and (
+                            abs(ddk) - half_w < (P[FM] if j_cav else P[HFM]))
                         passes = ((u_let < -P[YD]) or (g_back < P[ZG])) and (
                             v_j > ZIPPER_MOVING_MPS) and not follows_mover
                     if ahead or passes:
