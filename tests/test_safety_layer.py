@@ -107,6 +107,22 @@ def test_vehicle_beside_does_not_brake_but_one_within_clearance_does():
     assert layer.counts.speed == 1
 
 
+
+def test_vehicle_alongside_within_clearance_is_no_leader_unless_it_closes_in():
+    """A car alongside (its centre 0.1 m ahead, the bodies overlapping along the road) with
+    its side 0.2 m away (< 0.3 m clearance): a leader at a negative gap would stop the CAV
+    dead (TUM's ring: a human driver behind then ran into the CAV), which cannot avoid a
+    car beside; it is no leader while clear sideways, and still one when it moves towards
+    the CAV fast enough to close the 0.2 m within 1 s (``ALONGSIDE_S``)."""
+    layer = SafetyLayer(SafetyConfig())
+    beside = road([0.0, 0.1], [0.0, 2.0], [5.0, 5.0])
+    (u_long, _), _ = one_cav(layer, [0.5, 0.0], 0.0, beside)
+    assert u_long == 0.5 and layer.counts.speed == 0
+    closing = RoadState(beside.s, beside.d, beside.v, beside.length, beside.width,
+                        np.array([0.0, -0.3]))
+    (u_long, _), _ = one_cav(layer, [0.5, 0.0], 0.0, closing)
+    assert u_long < -5.0 and layer.counts.speed == 1
+
 def test_lateral_move_behind_a_vehicle_it_could_not_stop_behind_is_held_off():
     """A car 8 m ahead (centres) at 19 m/s, side gap 0.4 m, CAV at 20 m/s: sharing its
     band would put the CAV above its Krauss safe speed (~18.8 m/s), so the move stops at

@@ -33,6 +33,10 @@ Rules, applied in this order to CAV ``i`` with command ``u_i``:
    is at most ``v_safe = -b tau + sqrt((b tau)^2 + v_l^2 b / b_l + 2 b g)``,
    which lets the CAV stop behind a leader braking at ``b_l`` after one
    reaction delay ``tau``, braking itself at ``b`` (the emergency deceleration).
+   A vehicle alongside (the bodies overlap along the road, its centre ahead) that is
+   clear sideways along the move is no leader unless its lateral speed closes the gap
+   within ``ALONGSIDE_S`` (1 s): stopping dead cannot avoid a vehicle beside, and the
+   driver behind may not stop in time (rule 2 keeps the side clearance).
 
 Every activation is counted per rule.
 

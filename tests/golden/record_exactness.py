@@ -23,7 +23,8 @@ the code before the speed-ups of issue 15) and writes:
 The law and safety references depend on nothing else (the observations are stored). The
 runs depend on the whole co-simulation (demand, vehicle types, worlds, law, safety layer).
 When behaviour changes on purpose, record again what changed (``--parts traj`` for the
-runs, ``--parts law`` for the law and safety replays) on the current tree, in a commit of
+runs, ``--parts law`` for the law and safety replays, ``--parts replay`` for the replays
+on the stored observations) on the current tree, in a commit of
 its own that says why; never to make a speed-up pass. History: recorded on the numpy code
 before issue 15's speed-ups (the numba kernels matched it bit for bit); runs recorded again
 for the prefix-stable demand and calibrated human drivers, and for the zipper and
@@ -35,7 +36,9 @@ its stored observations) replayed again when a CAV behind a stopped car stopped 
 pushed towards it and CAVs gave held-up drivers SUMO's gap behind them (user-drawn roads);
 the law cases' commands replayed again and the runs recorded again when CAVs started to
 evade human drivers drifting towards them (``EVADE_S``) and to aim a little further clear
-of a stopped obstacle beside their band (``STATIC_CLEAR_M``).
+of a stopped obstacle beside their band (``STATIC_CLEAR_M``); the law and safety replays
+written again (``--parts replay``, the stored observations kept) when the safety layer
+stopped taking a vehicle alongside, clear sideways, for a leader (``ALONGSIDE_S``).
 """
 
 from __future__ import annotations
@@ -351,6 +354,43 @@ def _run_child(kind: str, name: str, root: str, tmp: Path) -> dict:
         return pickle.load(f)
 
 
+def replay(root: str) -> None:
+    """Replay the law and the safety layer of the current tree on the stored observations
+    of every law case and write their commands, counts and safety outputs again (the
+    observations, limits and safety parameters stay as recorded)."""
+    sys.path.insert(0, root)
+    with np.load(LAW_FILE) as z:
+        store = {k: z[k] for k in z.files}
+    for name in sorted(LAW_CASES):
+        steps = unpack_steps(name, store)
+        limits = _limits_from_json(store[f"{name}/limits"])
+        safety = _safety_from_json(store[f"{name}/safety"])
+        dt = float(store[f"{name}/dt"])
+        u, stats = replay_law(steps, limits)
+        store[f"{name}/u_law"] = np.concatenate(u)
+        store[f"{name}/law_stats"] = np.array(json.dumps(stats))
+        for tag, harsh_cmd in (("", False), ("_harsh", True)):
+            us, vls, counts = replay_safety(steps, limits, safety, dt, harsh_cmd=harsh_cmd)
+            store[f"{name}/u_safe{tag}"] = np.concatenate(us)
+            store[f"{name}/v_lat_next{tag}"] = np.concatenate(vls)
+            store[f"{name}/safety_counts{tag}"] = np.array(json.dumps(counts))
+        print(f"replayed {name}: stats {stats}", flush=True)
+    np.savez_compressed(LAW_FILE, **store)
+    print(f"wrote {LAW_FILE} ({LAW_FILE.stat().st_size / 1e3:.0f} kB)")
+
+
+def _limits_from_json(text) -> object:
+    from controllers.layers.constraints import ActuatorLimits
+
+    return ActuatorLimits(**json.loads(str(text)))
+
+
+def _safety_from_json(text) -> object:
+    from controllers.layers.safety import SafetyParams
+
+    return SafetyParams(**json.loads(str(text)))
+
+
 def record(root: str, parts: str = "all") -> None:
     sys.path.insert(0, root)
     law_store: dict = {"names": np.array(sorted(LAW_CASES))}
@@ -421,15 +461,20 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--root", default=str(HERE.parents[1]),
                     help="the code tree to record with (default: this repository)")
-    ap.add_argument("--parts", choices=("all", "law", "traj"), default="all",
-                    help="law: the law and safety references only; traj: the runs only")
+    ap.add_argument("--parts", choices=("all", "law", "traj", "replay"), default="all",
+                    help="law: the law and safety references only; traj: the runs only; "
+                         "replay: the law's and the safety layer's outputs on the stored "
+                         "observations")
     ap.add_argument("--child", nargs=2, default=None)
     ap.add_argument("--out", default=None)
     ns = ap.parse_args(argv)
     if ns.child:
         _child(ns.child[0], ns.child[1], ns.root, ns.out)
         return 0
-    record(ns.root, ns.parts)
+    if ns.parts == "replay":
+        replay(ns.root)
+    else:
+        record(ns.root, ns.parts)
     return 0
 
 

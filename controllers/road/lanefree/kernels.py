@@ -33,6 +33,7 @@ NAMES = (
     "clear_cap_m", "nudge_gain", "order_gain", "urgent_gain_mps", "queue_speed_mps",
     "bias_speed_low_mps", "coop_time_gap_s", "yield_decel_mps2", "comfort_decel_mps2",
     "congested_hysteresis_mps", "human_follow_margin_m", "mover_skips_followers",
+    "row_approach_gain",
     # derived (folded as the numpy code folded them)
     "bias_span", "app_bt2", "app_mbt", "app_2b", "scan_2b", "lat_2a", "two_lc",
     "zipper_gap", "long_min", "long_max", "lat_speed_max", "em_bt2", "em_mbt", "em_2b",
@@ -40,7 +41,7 @@ NAMES = (
 )
 (TG, TGH, S0, KP, KD, KFF, KPH, KDH, KV, KA, EMIN, EMAX, ANT, FM, KY, CY, LC, EM, SB, SBV,
  SBT, CIM, CIG, RG, LAS, LAM, SCM, SCT, MC, CG, CC, NG, OG, UG, QS, BL, CT, YD, CB, CH, HFM,
- MSF, BSPAN,
+ MSF, RAG, BSPAN,
  ABT2, AMBT, A2B, SC2B, L2A, TWOLC, ZG, LMIN, LMAX, VMAX, EBT2, EMBT, E2B, SHC, DT) = range(
     len(NAMES))
 
@@ -134,14 +135,14 @@ def _follow(P, g, v_j, a_j, j_cav, v, t_cav, t_hdv):
 
 
 @njit(cache=True, inline="always")
-def _approach(P, g, v_j, v):
-    """Approach bound ``k_a (v_safe - v)``, m/s^2."""
+def _approach(P, g, v_j, v, k_a):
+    """Approach bound ``k_a (v_safe - v)``, m/s^2 (``k_a`` 1/s)."""
     g0 = g - P[S0]
     vj = max(v_j, 0.0)
     root = math.sqrt(max(P[ABT2] + vj * vj + P[A2B] * g0, 0.0))
     v_safe = P[AMBT] + root if g0 > 0 else 0.0
     v_safe = max(v_safe, min(vj, max(g0, 0.0)))
-    return P[KA] * (v_safe - v)
+    return k_a * (v_safe - v)
 
 
 # ------------------------------------------------------------------ neighbours
@@ -361,13 +362,15 @@ def plan(P, rows, frac, lo, hi, current, j, ds, s, d, v, length, width, is_cav, 
 # ------------------------------------------------------------------ interactions
 @njit(cache=True)
 def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targets,
-             urgent, held, lead_gap, lead_v, v_des, edges, has_edges, static, evade_edges):
+             urgent, held, lead_gap, lead_v, v_des, edges, has_edges, static, evade_edges,
+             k_a):
     """Everything of one step that needs the window, per CAV:
 
     * side bounds ``hi``, ``lo`` (N,) m (the law's ``_side``);
     * longitudinal command (N,) m/s^2 from the desired speed, the primary leader
-      (``lead_gap``, ``lead_v``), the window leaders and the zipper (not the narrowing and
-      not the yield, which the caller adds: ``min`` is order-free);
+      (``lead_gap``, ``lead_v``; approach gains ``k_a`` (N,) 1/s), the window leaders and
+      the zipper (not the narrowing and not the yield, which the caller adds: ``min`` is
+      order-free);
     * the yield requests ``ask`` (N, K) and their commands ``u_yield`` (N, K), already
       bounded below by ``-yield_decel_mps2`` (before the patience rule), and how many
       pairs asked before the zipper rule took some back (``n_asked``: the law applies its
@@ -411,7 +414,7 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
         lo_human = False
         u = P[KV] * (v_des[i] - v_i)
         if np.isfinite(lead_gap[i]):
-            u = min(u, _approach(P, lead_gap[i], lead_v[i], v_i))
+            u = min(u, _approach(P, lead_gap[i], lead_v[i], v_i, k_a[i]))
         u_win = np.inf
         u_zip = np.inf
         mover_i = urgent[i]
@@ -492,7 +495,7 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
             is_leader = ahead and (min(lat_gap, lat_future) < P[FM])
             if is_leader:
                 u_f = _follow(P, g, v_j, accel[jj], j_cav, v_i, P[TG], P[TGH])
-                u_f = min(u_f, _approach(P, g, v_j, v_i))
+                u_f = min(u_f, _approach(P, g, v_j, v_i, k_a[i]))
                 u_win = min(u_win, u_f)
             # -- cooperation: a mover announced into this CAV's band from ahead, or a
             # held-up human driver next to it, asks for a gap
@@ -650,7 +653,7 @@ ROW_SLACK_M = 0.5
 
 @njit(cache=True)
 def _pull_to_rows(P, target, urgent, s, d, v, v_des, length, width, lo, hi, n, static_idx,
-                  periodic, period, row_pull):
+                  periodic, period, row_pull, k_a, between):
     """Rows in dense traffic (in place on ``target`` (N,) m): as a CAV's speed falls from
     95 % to 75 % of its desired speed, its lateral target is pulled, by up to ``row_pull``
     (0..1) of the way, to the nearest of the rows that fit across the road ahead: as many
@@ -695,6 +698,18 @@ def _pull_to_rows(P, target, urgent, s, d, v, v_des, length, width, lo, hi, n, s
             if ds_k > 0 and ds_k - 0.5 * (length[i] + length[kk]) < look:
                 free_row = False  # merging past an obstacle: no rows (they would
                 # hold the free part to whole rows)
+        # ``row_approach_gain``: a CAV about in a row follows with that approach gain
+        if free_row and P[RAG] > 0:
+            k_d = 0
+            if n_rows >= 2:
+                k_d = min(max(round((d[i] - lo_w) / step), 0), n_rows - 1)
+                in_row = abs(lo_w + k_d * step - d[i]) <= ROW_SLACK_M
+            else:
+                in_row = abs(nearest - d[i]) <= ROW_SLACK_M
+            if in_row:
+                k_a[i] = P[RAG]
+            else:
+                between[i] = True
         # a CAV about in a row stays where it is (moving a whole ordered flock by a few
         # decimetres costs more than it gives); one between two rows is pulled
         if free_row and abs(nearest - target[i]) > ROW_SLACK_M:
@@ -791,9 +806,20 @@ def law_step(P, s, d, v, v_lat, length, width, accel, is_cav, n, order, k_side, 
                     n_changes += 1
                 target[i] = best[r]
                 urgent[i] = need[r]
+    k_a = np.full(n, P[KA])
     if not fixed and row_pull > 0:
+        between = np.zeros(n, np.bool_)
         _pull_to_rows(P, target, urgent, s, d, v, v_des, length, width, lo, hi, n,
-                      static_idx, periodic, period, row_pull)
+                      static_idx, periodic, period, row_pull, k_a, between)
+        # the stable gain only where the window is in rows: the waves of the others are
+        # what lets a CAV between rows find a gap
+        for i in range(n):
+            if k_a[i] != P[KA]:
+                for k in range(j.shape[1]):
+                    jj = j[i, k]
+                    if np.isfinite(ds[i, k]) and jj < n and between[jj]:
+                        k_a[i] = P[KA]
+                        break
     for i in range(n):
         # a target outside the road ahead (narrowing) is pulled inside at once
         target[i] = min(max(target[i], lo[i]), max(lo[i], hi[i]))
@@ -811,7 +837,7 @@ def law_step(P, s, d, v, v_lat, length, width, accel, is_cav, n, order, k_side, 
         static[static_idx[q]] = True
     u_long, hi_n, lo_n, u_lat, ask, u_yield, n_asked = interact(
         P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, target, urgent, held,
-        lead_gap, lead_v, v_des, edges, True, static, evade)
+        lead_gap, lead_v, v_des, edges, True, static, evade, k_a)
     u = np.empty((n, 2))
     for i in range(n):
         u[i, 0] = min(max(u_long[i], P[LMIN]), P[LMAX])
@@ -853,7 +879,7 @@ def narrowing_bound(P, s, d, v, width, length, n, s0, right, left, periodic, per
                     best = min(best, ds)
         g = best - 0.5 * length[i]
         if np.isfinite(g):
-            out[i] = _approach(P, g, 0.0, v[i])
+            out[i] = _approach(P, g, 0.0, v[i], P[KA])
     return out, any_wall
 
 
