@@ -122,6 +122,18 @@ TUM_SIZES = [[3.2, 1.6, 0.2], [3.4, 1.7, 0.2], [3.9, 1.7, 0.2], [4.55, 1.82, 0.2
              [5.2, 1.88, 0.2]]
 
 
+def _tum_ring_at_tum_margins(overrides: dict):
+    """TUM's ring at 400 veh/km in the road world, started at rest in random places, step
+    0.25 s, TUM's sizes and desired speeds, TUM's car-following margins (T 0.5 s, 0.5 m;
+    safety layer 0.3 m), plus ``overrides``."""
+    return run_scenario(load_scenario("tum_ring", {
+        "scenario.world": "road", "scenario.step_length_s": 0.25,
+        "demand.ring_placement": "random", "demand.ring_initial_speed_mps": 0.0,
+        "demand.size_classes": TUM_SIZES, "demand.desired_speed_mps": [25.0, 35.0],
+        "demand.ring_density_vpkm": 400.0, "controller.params.time_gap_s": 0.5,
+        "controller.params.standstill_gap_m": 0.5, "safety.min_gap_m": 0.3, **overrides}))
+
+
 def test_a_mover_does_not_wait_for_the_cavs_that_follow_it():
     """TUM's protocol at 400 veh/km with TUM's car-following margins (time gap 0.5 s,
     standstill gap 0.5 m; 100 % CAVs started at rest, step 0.25 s): a CAV straddling two rows
@@ -133,14 +145,9 @@ def test_a_mover_does_not_wait_for_the_cavs_that_follow_it():
     without it (the default) 2.5 m/s."""
     speed = {}
     for skip in (False, True):
-        res = run_scenario(load_scenario("tum_ring", {
-            "scenario.world": "road", "scenario.duration_s": 300.0, "scenario.warmup_s": 150.0,
-            "scenario.interval_s": 30.0, "scenario.step_length_s": 0.25,
-            "demand.ring_placement": "random", "demand.ring_initial_speed_mps": 0.0,
-            "demand.size_classes": TUM_SIZES, "demand.desired_speed_mps": [25.0, 35.0],
-            "demand.ring_density_vpkm": 400.0, "controller.params.time_gap_s": 0.5,
-            "controller.params.standstill_gap_m": 0.5, "safety.min_gap_m": 0.3,
-            "controller.params.mover_skips_followers": skip}))
+        res = _tum_ring_at_tum_margins({
+            "scenario.duration_s": 300.0, "scenario.warmup_s": 150.0,
+            "scenario.interval_s": 30.0, "controller.params.mover_skips_followers": skip})
         s = res.summary.iloc[0]
         speed[skip] = s["space_mean_speed_mps"]
         assert s["collisions_geometric_cav"] == 0 and s["boundary_vehicle_steps_cav"] == 0
@@ -160,15 +167,10 @@ def test_rows_hold_their_equilibrium_with_a_stable_gain_where_they_have_formed()
     eq = rows_equilibrium_flow_vph(400.0, 4, 0.5, 0.5)
     flow = {}
     for gain in (0.0, 3.5):
-        res = run_scenario(load_scenario("tum_ring", {
-            "scenario.world": "road", "scenario.seed": 1, "scenario.duration_s": 600.0,
-            "scenario.warmup_s": 300.0, "scenario.step_length_s": 0.25,
-            "demand.ring_placement": "random", "demand.ring_initial_speed_mps": 0.0,
-            "demand.size_classes": TUM_SIZES, "demand.desired_speed_mps": [25.0, 35.0],
-            "demand.ring_density_vpkm": 400.0, "controller.params.time_gap_s": 0.5,
-            "controller.params.standstill_gap_m": 0.5, "safety.min_gap_m": 0.3,
+        res = _tum_ring_at_tum_margins({
+            "scenario.seed": 1, "scenario.duration_s": 600.0, "scenario.warmup_s": 300.0,
             "controller.params.mover_skips_followers": True,
-            "controller.params.row_approach_gain": gain}))
+            "controller.params.row_approach_gain": gain})
         s = res.summary.iloc[0]
         flow[gain] = s["edie_flow_vph"]
         assert s["collisions_geometric_cav"] == 0 and s["boundary_vehicle_steps_cav"] == 0

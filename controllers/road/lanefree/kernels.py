@@ -661,7 +661,12 @@ def _pull_to_rows(P, target, urgent, s, d, v, v_des, length, width, lo, hi, n, s
     evenly (the rows come from the vehicles' widths and the road, not from slots). A CAV
     whose move is announced (leaving a blocked band) is not pulled, nor one with a stopped
     obstacle ahead within the look-ahead (the free part of the road is no whole number of
-    rows: the planner's offers and the zipper arrange the merge)."""
+    rows: the planner's offers and the zipper arrange the merge).
+
+    With ``row_approach_gain`` > 0 it also marks, in place, a congested CAV within
+    ``ROW_SLACK_M`` of a row with that approach gain in ``k_a`` (N,) 1/s, and one that is
+    not in ``between`` (N,) bool (the caller keeps the gain only where no CAV in the window
+    is between rows)."""
     if n == 0:
         return
     w_max = 0.0
