@@ -1,6 +1,11 @@
 """The command line every check script shares (``--smoke``, ``--out``, ``--workers``,
-``--evaluate-only``, ``--quiet``): run its sweep (resumable: a second call runs only what
-is missing), then judge the folder. Bad options are one ``error:`` line, exit 2."""
+``--set``, ``--evaluate-only``, ``--quiet``): run its sweep (resumable: a second call runs
+only what is missing), then judge the folder. Bad options are one ``error:`` line, exit 2.
+
+``--set KEY=VALUE`` (repeatable, VALUE is TOML, as ``cosim run --set``) overrides a key in
+every run of the check, after the check's own overrides (a law option such as
+``controller.params.row_approach_gain=3.5`` through the whole family); each run's
+``config.toml`` records it."""
 
 from __future__ import annotations
 
@@ -26,11 +31,15 @@ def main(argv: list[str] | None, name: str, doc: str,
     ap.add_argument("--smoke", action="store_true", help="1 seed, short runs")
     ap.add_argument("--out", help=f"output folder (default outputs/{name}[_smoke])")
     ap.add_argument("--workers", type=int, help="parallel runs (default: every core)")
+    ap.add_argument("--set", action="append", metavar="KEY=VALUE",
+                    help="override a key in every run, e.g. --set "
+                         "controller.params.row_approach_gain=3.5 (repeatable; VALUE is TOML)")
     ap.add_argument("--evaluate-only", action="store_true",
                     help="judge the runs already in --out, run nothing")
     ap.add_argument("--quiet", action="store_true", help="no progress bar")
 
     def cmd(ns: argparse.Namespace) -> int:
+        from cosim.config.overrides import parse_assignments
         from cosim.sweeps.execute import run_sweep
         from cosim.sweeps.plan import sweep_from_dict
 
@@ -38,9 +47,10 @@ def main(argv: list[str] | None, name: str, doc: str,
             raise ConfigError(f"--workers must be >= 1 (got {ns.workers})")
         if ns.out is not None and not ns.out.strip():
             raise ConfigError("--out must not be empty")
+        extra = parse_assignments(ns.set or [])
         out = Path(ns.out or (f"outputs/{name}" + ("_smoke" if ns.smoke else "")))
         if not ns.evaluate_only:
-            plan = sweep_from_dict(plan_data(out, ns.smoke))
+            plan = sweep_from_dict(with_overrides(plan_data(out, ns.smoke), extra))
             res = run_sweep(plan, out, resume=out.is_dir() and any(out.iterdir()),
                             workers=ns.workers, progress=not ns.quiet)
             print(f"{res.n_run} runs in {res.wall_time_s:.0f} s: {res.n_ok} ok, "
@@ -50,6 +60,28 @@ def main(argv: list[str] | None, name: str, doc: str,
         return report(out, ns.smoke)
 
     return run_command(cmd, ap.parse_args(argv))
+
+
+def with_overrides(data: dict, extra: dict) -> dict:
+    """A check's sweep (``sweep_from_dict`` input) with the dotted-key overrides ``extra``
+    set in every run: in the common overrides and in each variant (they win over both).
+    A law parameter (``controller.params.*``) goes only to the runs of the check's own
+    controller (the common ``controller.kind``): the arms of SUMO's drivers alone have no
+    law to set."""
+    if not extra:
+        return data
+    out = dict(data)
+    common = data.get("overrides", {})
+    if not data.get("variants"):
+        out["overrides"] = {**common, **extra}
+        return out
+    law = {k: v for k, v in extra.items() if k.startswith("controller.params.")}
+    rest = {k: v for k, v in extra.items() if k not in law}
+    out["overrides"] = {**common, **rest}
+    kind = common.get("controller.kind")
+    out["variants"] = [{**v, **rest, **(law if v.get("controller.kind", kind) == kind else {})}
+                       for v in data["variants"]]
+    return out
 
 
 def arm_of(variant: str) -> str:

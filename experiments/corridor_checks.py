@@ -5,7 +5,8 @@ Usage::
     python -m experiments.corridor_checks                 # full: 3 seeds per arm
     python -m experiments.corridor_checks --smoke         # 1 seed, short runs
     python -m experiments.corridor_checks --evaluate-only # judge an existing folder again
-    options: --out DIR (default outputs/corridor_checks[_smoke]), --workers N
+    options: --out DIR (default outputs/corridor_checks[_smoke]), --workers N,
+             --set KEY=VALUE (every run; repeatable, as cosim run --set)
 
 The built-in ``corridor`` scenario (``experiments/scenarios/corridor.toml``: a 3.5 km,
 10.2 m lane-free mainline; a 3 m on-ramp strip of 482 m from 1 000 m; a 676 m weaving

@@ -5,7 +5,8 @@ Usage::
     python -m experiments.lanefree_checks                 # full: 5 seeds per arm
     python -m experiments.lanefree_checks --smoke         # 1 seed, short runs (CI form)
     python -m experiments.lanefree_checks --evaluate-only # judge an existing folder again
-    options: --out DIR (default outputs/lanefree_checks[_smoke]), --workers N
+    options: --out DIR (default outputs/lanefree_checks[_smoke]), --workers N,
+             --set KEY=VALUE (every run; repeatable, as cosim run --set)
 
 The runs go through the sweep machinery (``cosim.sweeps``: one process per run,
 resumable: a second call runs only what is missing). Arms (every CAV is the default

@@ -5,7 +5,8 @@ Usage::
     python -m experiments.user_road_checks                 # full: 3 seeds per arm
     python -m experiments.user_road_checks --smoke         # 1 seed, short runs
     python -m experiments.user_road_checks --evaluate-only # judge an existing folder again
-    options: --out DIR (default outputs/user_road_checks[_smoke]), --workers N
+    options: --out DIR (default outputs/user_road_checks[_smoke]), --workers N,
+             --set KEY=VALUE (every run; repeatable, as cosim run --set)
 
 Every road is drawn by :mod:`cosim.road.user_roads` from its seed (seeds 101-103: not
 the ones the law or the adapter were tuned on) and built with netconvert's defaults from

@@ -74,6 +74,26 @@ def test_the_low_frequency_string_condition_holds_with_margin():
     assert LaneFreeParams(ff_gain=0.0, kd=0.3).string_stability_margin() < 0
 
 
+def test_the_string_condition_behind_a_human_holds_by_default_and_in_the_tum_margins_arm():
+    """Behind a human driver (ACC gains, no shared acceleration): by default (T 0.9 s), and
+    in the TUM-margins sweep, whose 0.5 s behind humans needs a larger ``kd_hdv``."""
+    import tomllib
+    from pathlib import Path
+
+    p = LaneFreeParams()
+    assert p.string_stability_margin_hdv() == pytest.approx(
+        p.kp_hdv * p.time_gap_hdv_s**2 + 2 * p.kd_hdv * p.time_gap_hdv_s - 2)
+    assert p.string_stability_margin_hdv() > 1.0
+    # TUM's margins with our default ACC gains fail the condition ...
+    assert LaneFreeParams(time_gap_hdv_s=0.5).string_stability_margin_hdv() < 0
+    # ... so the arm raises kd_hdv; both conditions hold with its values
+    sweep = Path(__file__).parents[1] / "experiments/sweeps/tum_protocol_tum_margins.toml"
+    arm = LaneFreeParams(**tomllib.loads(sweep.read_text())["overrides"]["controller"]["params"])
+    assert arm.time_gap_hdv_s == arm.time_gap_s == 0.5
+    assert arm.string_stability_margin_hdv() > 0.1
+    assert arm.string_stability_margin() > 0.25
+
+
 def test_a_weakly_damped_law_amplifies_the_dip():
     """The test can fail: the same platoon with a string-unstable tuning amplifies."""
     dip = _platoon_dips(params=LaneFreeParams(kp=0.6, kd=0.2, ff_gain=0.0), delay_steps=1)

@@ -138,3 +138,17 @@ def test_four_rows_at_tums_margins_give_tums_congested_branch():
         assert tp.rows_equilibrium_flow_vph(k, 3, 0.5, 0.0) < 0.9 * tum
     assert round(tp.rows_equilibrium_flow_vph(400.0, 4, 0.6, 2.5)) == 8280
     assert tp.rows_equilibrium_flow_vph(50.0, 4, 0.5, 0.0, free_speed_mps=30.0) == 5400.0
+
+
+def test_mixed_rows_equilibrium_reduces_to_the_rows_and_prices_the_humans():
+    for k in (250.0, 400.0):
+        assert tp.mixed_rows_equilibrium_flow_vph(k, 4, 1.0, 0.5, 0.9, 0.5, 1.5) == \
+            pytest.approx(tp.rows_equilibrium_flow_vph(k, 4, 0.5, 0.5))
+    # 5 % humans with a 1.5 s reaction time, CAVs at 0.5 s behind everyone: mean time gap
+    # 0.55 s, fixed length 4.05 + 0.95 x 0.5 m; 100 veh/km per row
+    q = tp.mixed_rows_equilibrium_flow_vph(400.0, 4, 0.95, 0.5, 0.5, 0.5, 1.5)
+    assert q == pytest.approx(400 * (1000 / 100 - 4.05 - 0.475) / 0.55 * 3.6)
+    assert 1 - q / tp.rows_equilibrium_flow_vph(400.0, 4, 0.5, 0.5) == pytest.approx(
+        0.087, abs=0.002)
+    # a longer time gap behind a human costs flow
+    assert tp.mixed_rows_equilibrium_flow_vph(400.0, 4, 0.95, 0.5, 0.9, 0.5, 1.5) < q

@@ -73,6 +73,30 @@ def rows_equilibrium_flow_vph(density_vpkm: float, rows: int, time_gap_s: float,
     return density_vpkm * speed * 3.6
 
 
+def mixed_rows_equilibrium_flow_vph(density_vpkm: float, rows: int, cav_share: float,
+                                    time_gap_s: float, time_gap_hdv_s: float,
+                                    standstill_gap_m: float, human_time_gap_s: float,
+                                    human_standstill_gap_m: float = 0.0,
+                                    mean_length_m: float = TUM_MEAN_LENGTH_M,
+                                    free_speed_mps: float = math.inf) -> float:
+    """Flow of ``rows`` rows of mixed traffic at one common speed, veh/h: the
+    :func:`rows_equilibrium_flow_vph` equilibrium with humans (share ``1 - cav_share``)
+    mixed at random into the rows. Each vehicle's bumper gap is its standstill gap plus its
+    time gap times the speed: a CAV keeps ``time_gap_s`` behind a CAV and
+    ``time_gap_hdv_s`` behind a human (its leader a human with probability
+    ``1 - cav_share``), a human his ``human_time_gap_s`` (Krauss's equilibrium gap is the
+    reaction time times the speed) behind ``human_standstill_gap_m``; all in s and m. The
+    mean time gap per vehicle is then ``p (p T + (1 - p) T_hdv) + (1 - p) T_h``. An
+    expectation for the loss humans cost when every row runs at the same speed; rows that
+    run at different speeds (humans gathered in some) can do better or worse."""
+    p = cav_share
+    per_row_vpkm = density_vpkm / rows
+    mean_time_gap_s = p * (p * time_gap_s + (1 - p) * time_gap_hdv_s) + (1 - p) * human_time_gap_s
+    fixed_m = mean_length_m + p * standstill_gap_m + (1 - p) * human_standstill_gap_m
+    speed = min(max(1000.0 / per_row_vpkm - fixed_m, 0.0) / mean_time_gap_s, free_speed_mps)
+    return density_vpkm * speed * 3.6
+
+
 def is_tum_protocol(res: SweepResults) -> bool:
     """True for a ring sweep whose runs count vehicles at TUM's detector."""
     t = res.table

@@ -34,7 +34,8 @@ at all frequencies holds for ``k_p = 0.6, k_d = 0.95, k_ff = 0.6`` from T = 0.4 
 one or two steps of delay (checked numerically; ``tests/test_lanefree_law.py`` checks a
 20-CAV platoon's speed dip shrinking along the string). Behind human drivers
 (no shared acceleration) the ACC gains ``k_p = 0.55, k_d = 1.6`` with T = 0.9 s keep
-the condition (0.45 + 2.88 >= 2).
+the condition (0.45 + 2.88 >= 2); at a shorter ``time_gap_hdv_s`` raise ``kd_hdv`` with it
+(``LaneFreeParams.string_stability_margin_hdv()``; at 0.5 s at least 1.86 1/s).
 
 **Lateral** (``u_d``): each CAV chooses a lateral target ``d*`` every ``replan_s`` (staggered)
 by scoring candidate positions across the road ahead (``candidate_step_m`` apart, inside the

@@ -254,3 +254,10 @@ class LaneFreeParams:
         """``k_p T^2 + 2 k_d T - 2 (1 - k_ff)`` (>= 0: the low-frequency condition holds)."""
         T = self.time_gap_s
         return self.kp * T * T + 2 * self.kd * T - 2 * (1 - self.ff_gain)
+
+    def string_stability_margin_hdv(self) -> float:
+        """The same condition behind a human driver (ACC: no shared acceleration),
+        ``k_p,hdv T_hdv^2 + 2 k_d,hdv T_hdv - 2`` (>= 0: it holds). Default 0.45 + 2.88 - 2;
+        at ``time_gap_hdv_s`` = 0.5 s ``kd_hdv`` must be at least 1.86 1/s."""
+        T = self.time_gap_hdv_s
+        return self.kp_hdv * T * T + 2 * self.kd_hdv * T - 2
