@@ -458,10 +458,24 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
             g_pair = abs(x) - half_l - P[CIG]
             root = math.sqrt(max(P[EBT2] + v_lead * v_lead + P[E2B] * g_pair, 0.0))
             v_ok = 0.0 if g_pair < 0 else P[EMBT] + root
-            al = al or ((v_follow > v_ok - P[CIM]) and (v_follow > 0.01))
+            cut = (v_follow > v_ok - P[CIM]) and (v_follow > 0.01)
+            al = al or cut
             if ((stuck or (outside and j_cav)) and not ahead and v_j < ZIPPER_MOVING_MPS
                     and -x - half_l > STUCK_GAP_M):
                 al = False  # a slow vehicle behind lets a stuck mover in front of it
+            in_band = abs(ddk) < half_w and abs(x) >= half_l
+            if in_band and (ahead or not cut):
+                # in its band, one behind the other (the bodies overlap across the road,
+                # not along it): a leader or a follower that can stop behind it, not a
+                # vehicle at one side (the safety layer's rule 2); a follower that could
+                # not stop keeps its bound (the CAV does not move further into its band)
+                # but is no human driver to evade. Before, its bound sat on the side of its
+                # centre and, for a human driver, set off the evasion below: on TUM's ring
+                # (50 % CAVs, 350 veh/km) a CAV 0.01 m outside its edge margin, a human
+                # driver 1.8 m behind it in its band, was pushed in towards a CAV beside it
+                # whose bound the driver's had replaced, and the safety layer held it,
+                # every step, for minutes (2.2 % of the CAV-steps clipped)
+                al = False
             shift = P[SHC] if j_cav else abs(v_lat[jj]) * dt
             if not j_cav:  # a human driver drifting towards it: where it will be
                 toward = -v_lat[jj] if ddk > 0 else v_lat[jj]
@@ -471,11 +485,11 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
                 if ddk >= 0:
                     if d[jj] - need < hi:
                         hi = d[jj] - need
-                        hi_human = not j_cav
+                        hi_human = not j_cav and not in_band
                 else:
                     if d[jj] + need > lo:
                         lo = d[jj] + need
-                        lo_human = not j_cav
+                        lo_human = not j_cav and not in_band
             side_gap = abs(ddk) - half_w
             if static[jj] and x > 0 and x - half_l < block_reach and side_gap < P[TWOLC]:
                 if ddk > 0:
