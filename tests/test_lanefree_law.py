@@ -162,9 +162,7 @@ def test_a_mover_does_not_wait_for_the_cavs_that_follow_it():
     other, and from about 200 s the whole ring crawled at 1.15 m/s behind a 390 m hole
     (1 651 veh/h for good). With ``mover_skips_followers`` a vehicle that follows the mover
     does not pass it: measured 9.3 m/s over 150-300 s (every 30 s interval above 9 m/s);
-    without it (the default) 2.5 m/s. Since a vehicle in a CAV's band, one behind the
-    other, is no longer a neighbour at its side (kernels.interact) the file no longer
-    deadlocks without it either: 8.5 m/s without, 9.4 m/s with it."""
+    without it (the default) 2.5 m/s."""
     speed = {}
     for skip in (False, True):
         res = _tum_ring_at_tum_margins({
@@ -173,18 +171,17 @@ def test_a_mover_does_not_wait_for_the_cavs_that_follow_it():
         s = res.summary.iloc[0]
         speed[skip] = s["space_mean_speed_mps"]
         assert s["collisions_geometric_cav"] == 0 and s["boundary_vehicle_steps_cav"] == 0
-    assert speed[True] > speed[False] > 5.0
+    assert speed[True] > 5.0 > speed[False]
     assert res.intervals["space_mean_speed_mps"].min() > 3.0
 
 
 def test_rows_hold_their_equilibrium_with_a_stable_gain_where_they_have_formed():
     """The same ring (seed 1, 600 s, the last 300 s measured): at T = 0.5 s the approach
     bound (reaction time 0.5 s, gain 1.5 1/s) is active at equilibrium and string-unstable,
-    and the ring runs in stop-and-go waves below 4 rows' equilibrium flow (measured 14 002
-    veh/h, 0.89 of it; 11 722 before a vehicle in a CAV's band, one behind the other, was
-    no longer a neighbour at its side); ``row_approach_gain`` 3.5 1/s for CAVs in a row
-    whose window holds no CAV between rows keeps the waves that form the rows and damps
-    them once formed: measured 15 671 veh/h, 1.00 of the equilibrium (15 696)."""
+    and the ring runs in stop-and-go waves below 4 rows' equilibrium flow (measured 11 722
+    veh/h, 0.75 of it); ``row_approach_gain`` 3.5 1/s for CAVs in a row whose window holds
+    no CAV between rows keeps the waves that form the rows and damps them once formed:
+    measured 15 429 veh/h, 0.98 of the equilibrium (15 696)."""
     from cosim.analysis.tum_protocol import rows_equilibrium_flow_vph
 
     eq = rows_equilibrium_flow_vph(400.0, 4, 0.5, 0.5)
@@ -197,8 +194,8 @@ def test_rows_hold_their_equilibrium_with_a_stable_gain_where_they_have_formed()
         s = res.summary.iloc[0]
         flow[gain] = s["edie_flow_vph"]
         assert s["collisions_geometric_cav"] == 0 and s["boundary_vehicle_steps_cav"] == 0
-    assert flow[0.0] < 0.93 * eq
-    assert flow[3.5] > 0.97 * eq
+    assert flow[0.0] < 0.85 * eq
+    assert flow[3.5] > 0.95 * eq
 
 
 OBSTACLE = {"network.length_m": 1000.0, "demand.inflow_vph": 4000.0, "demand.cav_share": 1.0,
@@ -426,9 +423,10 @@ def test_a_human_driver_behind_in_its_band_is_no_neighbour_at_its_side():
     beside it 0.5 m away. The driver counted as a neighbour at one side: his bound replaced
     the CAV's beside it and set off the evasion of a human driver, which pushed the CAV in
     from the edge, into the CAV beside it, and the safety layer held it, every step, for
-    minutes (2.2 % of the CAV-steps at 350 veh/km clipped). A vehicle in the CAV's band,
-    one behind the other, is a leader or a follower (as in the safety layer's rule 2): the
-    CAV holds still beside the other CAV."""
+    minutes (2.2 % of the CAV-steps at 350 veh/km clipped). A human driver in the CAV's
+    band, one behind the other, is a leader or a follower (as in the safety layer's rule
+    2), and one that could not stop keeps his bound but is no driver to evade: the CAV
+    holds still beside the other CAV."""
     law = LaneFreeFlocking(LaneFreeParams(), RoadContext(dt=DT))
     obs = _obs([[0.0, -4.02], [0.0, -1.72]], [[3.7, 0.0], [3.7, 0.0]], [30.0, 30.0],
                others_q=[[-6.7, -3.86]], others_p=[[3.6, 0.0]])

@@ -463,18 +463,21 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
             if ((stuck or (outside and j_cav)) and not ahead and v_j < ZIPPER_MOVING_MPS
                     and -x - half_l > STUCK_GAP_M):
                 al = False  # a slow vehicle behind lets a stuck mover in front of it
-            in_band = abs(ddk) < half_w and abs(x) >= half_l
+            in_band = (not j_cav) and abs(ddk) < half_w and abs(x) >= half_l
             if in_band and (ahead or not cut):
-                # in its band, one behind the other (the bodies overlap across the road,
-                # not along it): a leader or a follower that can stop behind it, not a
-                # vehicle at one side (the safety layer's rule 2); a follower that could
-                # not stop keeps its bound (the CAV does not move further into its band)
-                # but is no human driver to evade. Before, its bound sat on the side of its
-                # centre and, for a human driver, set off the evasion below: on TUM's ring
-                # (50 % CAVs, 350 veh/km) a CAV 0.01 m outside its edge margin, a human
-                # driver 1.8 m behind it in its band, was pushed in towards a CAV beside it
-                # whose bound the driver's had replaced, and the safety layer held it,
-                # every step, for minutes (2.2 % of the CAV-steps clipped)
+                # a human driver in its band, one behind the other (the bodies overlap
+                # across the road, not along it): a leader or a follower that can stop
+                # behind it, not a driver at one side (the safety layer's rule 2); one that
+                # could not stop keeps his bound (the CAV does not move further into his
+                # band) but is no driver to evade. Before, his bound sat on the side of his
+                # centre, replaced the bound of a CAV beside on that side and set off the
+                # evasion below: on TUM's ring (50 % CAVs, 350 veh/km, TUM's margins) a CAV
+                # 0.01 m outside its edge margin, a human driver 1.8 m behind it in its
+                # band, was pushed in towards a CAV beside it, and the safety layer held it
+                # every step for minutes (2.2 % of the CAV-steps clipped). (For a CAV in
+                # its band the rule stays as it was: applied to CAVs too it changed the
+                # timing of a weave on a user's freeway into a deadlock of two CAVs side by
+                # side, each announced into the other's place, and a collision.)
                 al = False
             shift = P[SHC] if j_cav else abs(v_lat[jj]) * dt
             if not j_cav:  # a human driver drifting towards it: where it will be
