@@ -417,18 +417,23 @@ def test_a_cav_stuck_behind_a_stopped_car_moves_in_front_of_a_slow_vehicle_behin
     assert u[0, 1] > 0.1  # steers for it now
 
 
-def test_a_human_driver_behind_in_its_band_is_no_neighbour_at_its_side():
+@pytest.mark.parametrize("follows", [False, True])
+def test_a_human_driver_behind_in_its_band_is_no_neighbour_at_its_side(follows):
     """TUM's ring at 50 % CAVs, 350 veh/km (seed 2): a CAV 0.02 m outside its edge margin
     had a human driver 2.2 m behind it in its band (too close to stop if it cut in) and a CAV
     beside it 0.5 m away. The driver counted as a neighbour at one side: his bound replaced
     the CAV's beside it and set off the evasion of a human driver, which pushed the CAV in
     from the edge, into the CAV beside it, and the safety layer held it, every step, for
-    minutes (2.2 % of the CAV-steps at 350 veh/km clipped). A human driver in the CAV's
-    band, one behind the other, is a leader or a follower (as in the safety layer's rule
-    2), and one that could not stop keeps his bound but is no driver to evade: the CAV
-    holds still beside the other CAV."""
-    law = LaneFreeFlocking(LaneFreeParams(), RoadContext(dt=DT))
+    minutes (2.2 % of the CAV-steps at 350 veh/km clipped). With ``human_in_band_follows``
+    a human driver in the CAV's band, one behind the other, is a leader or a follower (as
+    in the safety layer's rule 2), and one that could not stop keeps his bound but is no
+    driver to evade: the CAV holds still beside the other CAV. Off (the default) the CAV
+    still moves towards it, as before."""
+    law = LaneFreeFlocking(LaneFreeParams(human_in_band_follows=follows), RoadContext(dt=DT))
     obs = _obs([[0.0, -4.02], [0.0, -1.72]], [[3.7, 0.0], [3.7, 0.0]], [30.0, 30.0],
                others_q=[[-6.7, -3.86]], others_p=[[3.6, 0.0]])
     v_lat_next = law.compute(obs)[0, 1] * DT
-    assert v_lat_next <= 1e-9  # not towards the CAV beside it (before: +0.15 m/s)
+    if follows:
+        assert v_lat_next <= 1e-9  # not towards the CAV beside it
+    else:
+        assert v_lat_next > 0.1  # the default: +0.15 m/s towards it

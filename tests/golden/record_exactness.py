@@ -38,9 +38,7 @@ the law cases' commands replayed again and the runs recorded again when CAVs sta
 evade human drivers drifting towards them (``EVADE_S``) and to aim a little further clear
 of a stopped obstacle beside their band (``STATIC_CLEAR_M``); the law and safety replays
 written again (``--parts replay``, the stored observations kept) when the safety layer
-stopped taking a vehicle alongside, clear sideways, for a leader (``ALONGSIDE_S``); the
-runs recorded again when a human driver in a CAV's band, one behind the other, stopped being
-a neighbour at its side in the law (``kernels.interact``).
+stopped taking a vehicle alongside, clear sideways, for a leader (``ALONGSIDE_S``).
 """
 
 from __future__ import annotations

@@ -33,7 +33,7 @@ NAMES = (
     "clear_cap_m", "nudge_gain", "order_gain", "urgent_gain_mps", "queue_speed_mps",
     "bias_speed_low_mps", "coop_time_gap_s", "yield_decel_mps2", "comfort_decel_mps2",
     "congested_hysteresis_mps", "human_follow_margin_m", "mover_skips_followers",
-    "row_approach_gain",
+    "row_approach_gain", "human_in_band_follows",
     # derived (folded as the numpy code folded them)
     "bias_span", "app_bt2", "app_mbt", "app_2b", "scan_2b", "lat_2a", "two_lc",
     "zipper_gap", "long_min", "long_max", "lat_speed_max", "em_bt2", "em_mbt", "em_2b",
@@ -41,7 +41,7 @@ NAMES = (
 )
 (TG, TGH, S0, KP, KD, KFF, KPH, KDH, KV, KA, EMIN, EMAX, ANT, FM, KY, CY, LC, EM, SB, SBV,
  SBT, CIM, CIG, RG, LAS, LAM, SCM, SCT, MC, CG, CC, NG, OG, UG, QS, BL, CT, YD, CB, CH, HFM,
- MSF, RAG, BSPAN,
+ MSF, RAG, HIB, BSPAN,
  ABT2, AMBT, A2B, SC2B, L2A, TWOLC, ZG, LMIN, LMAX, VMAX, EBT2, EMBT, E2B, SHC, DT) = range(
     len(NAMES))
 
@@ -463,9 +463,11 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
             if ((stuck or (outside and j_cav)) and not ahead and v_j < ZIPPER_MOVING_MPS
                     and -x - half_l > STUCK_GAP_M):
                 al = False  # a slow vehicle behind lets a stuck mover in front of it
-            in_band = (not j_cav) and abs(ddk) < half_w and abs(x) >= half_l
+            in_band = (P[HIB] > 0.0 and not j_cav and abs(ddk) < half_w
+                       and abs(x) >= half_l)
             if in_band and (ahead or not cut):
-                # a human driver in its band, one behind the other (the bodies overlap
+                # (``human_in_band_follows``; off by default, see its doc) a human driver in
+                # its band, one behind the other (the bodies overlap
                 # across the road, not along it): a leader or a follower that can stop
                 # behind it, not a driver at one side (the safety layer's rule 2); one that
                 # could not stop keeps his bound (the CAV does not move further into his
