@@ -437,3 +437,32 @@ def test_a_human_driver_behind_in_its_band_is_no_neighbour_at_its_side(follows):
         assert v_lat_next <= 1e-9  # not towards the CAV beside it
     else:
         assert v_lat_next > 0.1  # the default: +0.15 m/s towards it
+
+
+
+def test_a_slow_cav_behind_a_merging_cav_at_its_strips_end_holds_for_its_move():
+    """A user's freeway (``freeway-2``, 40 % CAVs, seed 2, with ``human_in_band_follows``):
+    a CAV from the second on-ramp, bound for the main road, stood 0.5 m before the end of
+    its strip, its body over the road's edge there, and announced its move left; a CAV
+    bound for the next exit, which had followed it along the strip, crept at 0.11 m/s
+    2.0 m behind it and 0.45 m to its left (no leader: clear sideways). Too close to be
+    asked for a gap (below the zipper gap), it crept on to 1.0 m, inside the safety
+    layer's 2 m buffer, where the layer held the merging CAV off its band: both stood for
+    460 s and the queue behind them grew. A slow CAV behind a standing mover announced
+    into its band holds instead (holding costs it nothing)."""
+    road = RoadProfile(np.array([0.0, 1548.1, 1773.54, 2000.25, 2166.0]),
+                       np.array([-4.8, -8.0, -4.8, -8.0, -4.8]), np.full(5, 4.8), 2539.4)
+    q = np.array([[1771.09, -4.50], [1764.91, -2.31]])  # the merging CAV, the one behind
+    law = LaneFreeFlocking(LaneFreeParams(), RoadContext(dt=DT))
+    obs = Observation(q=q, p=np.array([[0.0, 0.0], [0.11, 0.0]]), t=140.0, dt=DT,
+                      ids=np.array(["merging", "behind"], dtype=object),
+                      length=np.array([3.9, 4.5]), width=np.array([1.7, 1.78]),
+                      road_edges=road.edges(q[:, 0]), road=road,
+                      desired_speed=np.array([28.5, 31.4]),
+                      exits=np.array([[2000.25, 2166.0, -8.0, -4.8]]),
+                      exit_index=np.array([0, 1]),
+                      entries=np.array([[1548.1, 1773.54, -8.0, -4.8]]))
+    u = law.compute(obs)
+    assert law._target["merging"] > -4.5 + 0.5  # onto the main road, in front of the other
+    assert u[0, 1] > 0.1  # it steers there now
+    assert 0.11 + u[1, 0] * DT <= 1e-9  # the one behind stops where it is

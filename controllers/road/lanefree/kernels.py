@@ -404,6 +404,13 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
     push = np.zeros(k2)
     n_asked = 0
     dt = P[DT]
+    # slow CAVs whose body is outside the road ahead (a strip that ends): they must move
+    must_move = np.zeros(n, np.bool_)
+    if has_edges:
+        for i in range(n):
+            must_move[i] = v[i] < ZIPPER_MOVING_MPS and (
+                d[i] - 0.5 * width[i] < edges[i, 0] - OUTSIDE_TOL_M
+                or d[i] + 0.5 * width[i] > edges[i, 1] + OUTSIDE_TOL_M)
     for i in range(n):
         v_i, d_i, vl_i, l_i, w_i = v[i], d[i], v_lat[i], length[i], width[i]
         # one pass over the window: side bounds and repulsion (the law's _side), leaders,
@@ -432,9 +439,7 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
                         stuck = True
         # its body outside the road ahead (a strip that ends): it must move (in front of
         # CAVs behind it only: a human driver behind does not know it waits for him)
-        outside = (not stuck and has_edges and v_i < ZIPPER_MOVING_MPS
-                   and (d_i - 0.5 * w_i < edges[i, 0] - OUTSIDE_TOL_M
-                        or d_i + 0.5 * w_i > edges[i, 1] + OUTSIDE_TOL_M))
+        outside = not stuck and must_move[i]
         for k in range(k2):
             x = ds[i, k]
             ddk = dd[i, k]
@@ -537,6 +542,18 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
                     if not (j_cav and ((u_c < -P[YD]) or (g < P[ZG]))):
                         ask[i, k] = True
                         u_yield[i, k] = max(u_c, -P[YD])
+                # a slow CAV behind a standing CAV that must move into its band (its body
+                # over the road's edge ahead: a strip that ends) holds at any gap ahead of
+                # the mover's tail (holding costs it nothing, and the zipper lets the
+                # standing mover go first): creeping on into the gap that the mover needs,
+                # it would take the safety layer's buffer, which then holds the mover off
+                # its band (a user's freeway: both stood 460 s). (Not for every announced
+                # mover: on a dense ring that is ``mover_skips_followers``'s question.)
+                if (j_cav and jj < n and not ask[i, k] and g > 0 and must_move[jj]
+                        and v_i < ZIPPER_MOVING_MPS and into and not_yet):
+                    n_asked += 1
+                    ask[i, k] = True
+                    u_yield[i, k] = max(-v_i / dt, -P[YD])
             # -- zipper: an announced mover slots in behind the vehicles of its target band
             # (not behind a CAV standing that it already overlaps: it cannot get behind
             # that one, which may wait for it to pass, so it passes)

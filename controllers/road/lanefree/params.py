@@ -98,8 +98,8 @@ class LaneFreeParams:
             CAV pushed from the edge into a CAV beside it by a human driver behind it (TUM's
             ring, 50 % CAVs, 350 veh/km, TUM's margins: 2.2 % of the CAV-steps clipped) and
             a 119 s standstill on a user's width step; off by default because with it the
-            corridor's checks regressed (a CAV collision and a 460 s standstill at 40 %
-            CAVs on ``freeway-2``, a 33 s standstill at 70 % on ``corridor``).
+            corridor's checks pass 64 of 65 (a CAV merging from a stop at 70 % CAVs on
+            ``corridor`` waited 30.4 s for a gap; bound 30 s).
         row_approach_gain: approach gain k_a (1/s) of a congested CAV about in a row
             (within ``ROW_SLACK_M`` of it) whose window holds no CAV between rows; 0: the
             ``approach_gain`` everywhere (the default). At a time gap equal to the
