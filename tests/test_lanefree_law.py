@@ -439,7 +439,6 @@ def test_a_human_driver_behind_in_its_band_is_no_neighbour_at_its_side(follows):
         assert v_lat_next > 0.1  # the default: +0.15 m/s towards it
 
 
-
 def test_a_slow_cav_behind_a_merging_cav_at_its_strips_end_holds_for_its_move():
     """A user's freeway (``freeway-2``, 40 % CAVs, seed 2, with ``human_in_band_follows``):
     a CAV from the second on-ramp, bound for the main road, stood 0.5 m before the end of
@@ -448,8 +447,9 @@ def test_a_slow_cav_behind_a_merging_cav_at_its_strips_end_holds_for_its_move():
     2.0 m behind it and 0.45 m to its left (no leader: clear sideways). Too close to be
     asked for a gap (below the zipper gap), it crept on to 1.0 m, inside the safety
     layer's 2 m buffer, where the layer held the merging CAV off its band: both stood for
-    460 s and the queue behind them grew. A slow CAV behind a standing mover announced
-    into its band holds instead (holding costs it nothing)."""
+    460 s and the queue behind them grew. A slow CAV behind a standing CAV whose body is
+    over the road's edge ahead, with that CAV's target in its band, holds instead (holding
+    costs it nothing); here the merging CAV is fresh, not yet announced."""
     road = RoadProfile(np.array([0.0, 1548.1, 1773.54, 2000.25, 2166.0]),
                        np.array([-4.8, -8.0, -4.8, -8.0, -4.8]), np.full(5, 4.8), 2539.4)
     q = np.array([[1771.09, -4.50], [1764.91, -2.31]])  # the merging CAV, the one behind

@@ -392,7 +392,10 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
       vehicle behind it (a slow CAV whose body is outside the road ahead,
       :data:`OUTSIDE_TOL_M`, in front of a CAV behind it) that is slower than
       :data:`ZIPPER_MOVING_MPS` and at least :data:`STUCK_GAP_M` back (in a slow, dense
-      file nobody is far enough back to yield, and the mover would wait for ever).
+      file nobody is far enough back to yield, and the mover would wait for ever). A CAV
+      slower than :data:`ZIPPER_MOVING_MPS` behind such a slow CAV outside the road ahead,
+      with that CAV's target in its band, is asked to hold where it is (``ask``, at any
+      gap; it would otherwise creep into the safety layer's buffer behind the mover).
     """
     k2 = j.shape[1]
     u_long = np.empty(n)
