@@ -403,6 +403,20 @@ def test_a_cav_moves_out_of_the_way_of_a_human_drifting_towards_it():
     assert lateral(0.0) > -0.1
 
 
+def test_a_cav_squeezed_between_a_human_too_close_and_a_cav_moves_to_the_middle():
+    """The width drop at 60 % CAVs (seed 2, 597 s): a human driver overtook a CAV 0.14 m to
+    its right and drifted into it, while a CAV on its other side held it inside the
+    other's clearance too. Both bounds violated, the CAV held still; it now moves to the
+    middle of the two bounds (here 0.1 m to the left: towards the CAV, away from the
+    driver). c0 at -2.3 m, the driver 0.2 m to its right (inside his 0.5 m clearance), c1
+    2.35 m to its left (0.55 m between the bodies, below the 0.5 m + one step's shift a
+    CAV keeps from a CAV)."""
+    law = LaneFreeFlocking(LaneFreeParams(), RoadContext(dt=DT))
+    obs = _obs([[0.0, -2.3], [0.0, 0.05]], [[10.0, 0.0], [10.0, 0.0]], [30.0, 30.0],
+               others_q=[[0.5, -4.3]], others_p=[[10.0, 0.0]])
+    assert law.compute(obs)[0, 1] > 0.1
+
+
 def test_a_cav_stuck_behind_a_stopped_car_moves_in_front_of_a_slow_vehicle_behind():
     """A 6 m road; a stopped car ahead on the right (never seen moving) leads the CAV c0;
     the free band beside it is where c1 creeps along 3 m behind c0 at 0.5 m/s. c0 keeps

@@ -38,7 +38,9 @@ the law cases' commands replayed again and the runs recorded again when CAVs sta
 evade human drivers drifting towards them (``EVADE_S``) and to aim a little further clear
 of a stopped obstacle beside their band (``STATIC_CLEAR_M``); the law and safety replays
 written again (``--parts replay``, the stored observations kept) when the safety layer
-stopped taking a vehicle alongside, clear sideways, for a leader (``ALONGSIDE_S``).
+stopped taking a vehicle alongside, clear sideways, for a leader (``ALONGSIDE_S``); the
+law replays written again and the runs recorded again when a CAV squeezed between a human
+driver too close to it and another vehicle started to move to the middle of the two bounds.
 """
 
 from __future__ import annotations

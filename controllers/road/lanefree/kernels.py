@@ -387,7 +387,9 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
       of it (within ``evade_edges`` (N, 2) m and the other side's bound) instead of holding
       still: the band the law keeps clear beside an exit's strip for a human driver
       leaving is no wall to a CAV a human driver moves onto (a user's freeway: a driver at
-      34.7 m/s moved onto a CAV held at that band's border).
+      34.7 m/s moved onto a CAV held at that band's border). Squeezed between such a
+      driver and another vehicle (both bounds in conflict), it moves to the middle of the
+      two bounds instead of holding still.
       An announced mover still behind a stopped obstacle moves sideways in front of a
       vehicle behind it (a slow CAV whose body is outside the road ahead,
       :data:`OUTSIDE_TOL_M`, in front of a CAV behind it) that is slower than
@@ -633,6 +635,14 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
         v_next = min(max(min(max(want, v_lo_e), v_hi_e), v_lo_n), v_hi_n)
         if v_lo_n > v_hi_n:
             v_next = 0.0
+            if (hi_human and hi < d_i) != (lo_human and lo > d_i):
+                # squeezed between a human driver who came too close and another
+                # vehicle: the middle of the two bounds (held still, it was touched by the
+                # driver drifting on: a width drop, 60 % CAVs, a CAV between a CAV and a
+                # driver overtaking it at 0.14 m)
+                mid = 0.5 * (lo + hi)
+                v_next = min(max(np.sign(mid - d_i) * math.sqrt(a2 * abs(mid - d_i)),
+                                 v_lo_e), v_hi_e)
         u_lat[i] = (v_next - vl_i) / dt
     return u_long, hi_n, lo_n, u_lat, ask, u_yield, n_asked
 
