@@ -40,8 +40,7 @@ of a stopped obstacle beside their band (``STATIC_CLEAR_M``); the law and safety
 written again (``--parts replay``, the stored observations kept) when the safety layer
 stopped taking a vehicle alongside, clear sideways, for a leader (``ALONGSIDE_S``); the
 law replays written again and the runs recorded again when a CAV squeezed between a human
-driver too close to it and another vehicle started to move to the middle of the two bounds,
-and again when it took the middle only away from that driver.
+driver too close to it and another vehicle started to move to the middle of the two bounds.
 """
 
 from __future__ import annotations

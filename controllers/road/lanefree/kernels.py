@@ -635,20 +635,14 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
         v_next = min(max(min(max(want, v_lo_e), v_hi_e), v_lo_n), v_hi_n)
         if v_lo_n > v_hi_n:
             v_next = 0.0
-            lo_too_close = lo_human and lo > d_i
-            if (hi_human and hi < d_i) != lo_too_close:
+            if (hi_human and hi < d_i) != (lo_human and lo > d_i):
                 # squeezed between a human driver who came too close and another
                 # vehicle: the middle of the two bounds (held still, it was touched by the
                 # driver drifting on: a width drop, 60 % CAVs, a CAV between a CAV and a
-                # driver overtaking it at 0.14 m), but only away from the driver: where
-                # the middle lies towards him (the other vehicle's bound the deeper one)
-                # it holds still (moving there, a CAV came within the follow margin of a
-                # driver beside it on TUM's ring, 90 % CAVs, 400 veh/km, TUM's margins:
-                # each then followed the other and the whole ring stood)
+                # driver overtaking it at 0.14 m)
                 mid = 0.5 * (lo + hi)
-                if (mid > d_i) == lo_too_close:
-                    v_next = min(max(np.sign(mid - d_i) * math.sqrt(a2 * abs(mid - d_i)),
-                                     v_lo_e), v_hi_e)
+                v_next = min(max(np.sign(mid - d_i) * math.sqrt(a2 * abs(mid - d_i)),
+                                 v_lo_e), v_hi_e)
         u_lat[i] = (v_next - vl_i) / dt
     return u_long, hi_n, lo_n, u_lat, ask, u_yield, n_asked
 
