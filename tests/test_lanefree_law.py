@@ -408,9 +408,11 @@ def test_a_cav_squeezed_between_a_human_too_close_and_a_cav_moves_to_the_middle(
     its right and drifted into it, while a CAV on its other side held it inside the
     other's clearance too. Both bounds violated, the CAV held still; it now moves to the
     middle of the two bounds (here 0.1 m to the left: towards the CAV, away from the
-    driver). c0 at -2.3 m, the driver 0.2 m to its right (inside his 0.5 m clearance), c1
-    2.35 m to its left (0.55 m between the bodies, below the 0.5 m + one step's shift a
-    CAV keeps from a CAV)."""
+    driver). c0 at -2.3 m, the driver 2.0 m to its right (0.2 m between the bodies, inside
+    his 0.5 m clearance; his body reaches 0.1 m over the road's edge and the law takes him
+    at the edge), c1 2.35 m to its left (0.55 m between the bodies, below the 0.5 m + one
+    step's shift a CAV keeps from a CAV). The rule breaks TUM's ring with TUM's margins
+    (docs/results.md, Open questions)."""
     law = LaneFreeFlocking(LaneFreeParams(), RoadContext(dt=DT))
     obs = _obs([[0.0, -2.3], [0.0, 0.05]], [[10.0, 0.0], [10.0, 0.0]], [30.0, 30.0],
                others_q=[[0.5, -4.3]], others_p=[[10.0, 0.0]])
