@@ -419,6 +419,24 @@ def test_a_cav_squeezed_between_a_human_too_close_and_a_cav_moves_to_the_middle(
     assert law.compute(obs)[0, 1] > 0.1
 
 
+def test_a_cav_passing_a_slower_driver_who_turns_towards_it_slows_to_pass_him():
+    """The width drop at 60 % CAVs (seed 10): a CAV closed up at 12 m/s beside a driver at
+    4 m/s 1.5 m ahead of its bumper who turned into it. Here the driver is 0.8 m beside its
+    body and turns towards it at 0.3 m/s (not yet a leader: 0.5 m apart in the 1 s
+    anticipation): the CAV brakes (its cap is 4 + 5 x 0.8 = 8 m/s, it brakes at the comfort
+    deceleration 2.5 m/s^2). A driver who keeps his line, or one 1.2 m beside its body,
+    does not slow it."""
+    def u_long(dy, v_lat_human):
+        law = LaneFreeFlocking(LaneFreeParams(), RoadContext(dt=DT))
+        obs = _obs([[0.0, 0.0]], [[12.0, 0.0]], [12.0], others_q=[[6.0, dy]],
+                   others_p=[[4.0, v_lat_human]])
+        return law.compute(obs)[0, 0]
+
+    assert u_long(2.6, -0.3) == pytest.approx(-LaneFreeParams().comfort_decel_mps2)
+    assert u_long(2.6, 0.0) == pytest.approx(0.0)
+    assert u_long(3.0, -0.3) == pytest.approx(0.0)
+
+
 def test_a_cav_stuck_behind_a_stopped_car_moves_in_front_of_a_slow_vehicle_behind():
     """A 6 m road; a stopped car ahead on the right (never seen moving) leads the CAV c0;
     the free band beside it is where c1 creeps along 3 m behind c0 at 0.5 m/s. c0 keeps

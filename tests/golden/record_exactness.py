@@ -40,7 +40,9 @@ of a stopped obstacle beside their band (``STATIC_CLEAR_M``); the law and safety
 written again (``--parts replay``, the stored observations kept) when the safety layer
 stopped taking a vehicle alongside, clear sideways, for a leader (``ALONGSIDE_S``); the
 law replays written again and the runs recorded again when a CAV squeezed between a human
-driver too close to it and another vehicle started to move to the middle of the two bounds.
+driver too close to it and another vehicle started to move to the middle of the two bounds;
+the law replays written again when a CAV passing a slower human driver who turns towards it
+started to cap its speed by the lateral gap (``PASS_*``; the runs did not change).
 """
 
 from __future__ import annotations
