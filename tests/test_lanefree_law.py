@@ -346,6 +346,7 @@ def test_the_human_follow_margin_comes_from_the_run():
 @pytest.mark.parametrize("bad", [
     {"time_gap_s": 0.0}, {"time_gap_s": float("nan")}, {"kp": -1.0}, {"ff_gain": 1.5},
     {"window": 1}, {"spacing_error_min_m": 1.0}, {"lat_gain": float("inf")},
+    {"squeezed_moves_to_middle": 1}, {"human_in_band_follows": "yes"},
 ])
 def test_invalid_parameters_are_refused(bad):
     with pytest.raises(ParameterError):
@@ -412,11 +413,17 @@ def test_a_cav_squeezed_between_a_human_too_close_and_a_cav_moves_to_the_middle(
     his 0.5 m clearance; his body reaches 0.1 m over the road's edge and the law takes him
     at the edge), c1 2.35 m to its left (0.55 m between the bodies, below the 0.5 m + one
     step's shift a CAV keeps from a CAV). The rule breaks TUM's ring with TUM's margins
-    (docs/results.md, Open questions)."""
-    law = LaneFreeFlocking(LaneFreeParams(), RoadContext(dt=DT))
-    obs = _obs([[0.0, -2.3], [0.0, 0.05]], [[10.0, 0.0], [10.0, 0.0]], [30.0, 30.0],
-               others_q=[[0.5, -4.3]], others_p=[[10.0, 0.0]])
-    assert law.compute(obs)[0, 1] > 0.1
+    (docs/results.md, Open questions): ``squeezed_moves_to_middle = false`` (the margins
+    arm) holds it still, as before the rule."""
+    def lateral(to_middle):
+        law = LaneFreeFlocking(LaneFreeParams(squeezed_moves_to_middle=to_middle),
+                               RoadContext(dt=DT))
+        obs = _obs([[0.0, -2.3], [0.0, 0.05]], [[10.0, 0.0], [10.0, 0.0]], [30.0, 30.0],
+                   others_q=[[0.5, -4.3]], others_p=[[10.0, 0.0]])
+        return law.compute(obs)[0, 1]
+
+    assert lateral(True) > 0.1
+    assert lateral(False) == pytest.approx(0.0)
 
 
 def test_a_cav_passing_a_slower_driver_who_turns_towards_it_slows_to_pass_him():

@@ -33,7 +33,7 @@ NAMES = (
     "clear_cap_m", "nudge_gain", "order_gain", "urgent_gain_mps", "queue_speed_mps",
     "bias_speed_low_mps", "coop_time_gap_s", "yield_decel_mps2", "comfort_decel_mps2",
     "congested_hysteresis_mps", "human_follow_margin_m", "mover_skips_followers",
-    "row_approach_gain", "human_in_band_follows",
+    "row_approach_gain", "human_in_band_follows", "squeezed_moves_to_middle",
     # derived (folded as the numpy code folded them)
     "bias_span", "app_bt2", "app_mbt", "app_2b", "scan_2b", "lat_2a", "two_lc",
     "zipper_gap", "long_min", "long_max", "lat_speed_max", "em_bt2", "em_mbt", "em_2b",
@@ -41,7 +41,7 @@ NAMES = (
 )
 (TG, TGH, S0, KP, KD, KFF, KPH, KDH, KV, KA, EMIN, EMAX, ANT, FM, KY, CY, LC, EM, SB, SBV,
  SBT, CIM, CIG, RG, LAS, LAM, SCM, SCT, MC, CG, CC, NG, OG, UG, QS, BL, CT, YD, CB, CH, HFM,
- MSF, RAG, HIB, BSPAN,
+ MSF, RAG, HIB, SQM, BSPAN,
  ABT2, AMBT, A2B, SC2B, L2A, TWOLC, ZG, LMIN, LMAX, VMAX, EBT2, EMBT, E2B, SHC, DT) = range(
     len(NAMES))
 
@@ -646,11 +646,11 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
         v_next = min(max(min(max(want, v_lo_e), v_hi_e), v_lo_n), v_hi_n)
         if v_lo_n > v_hi_n:
             v_next = 0.0
-            if (hi_human and hi < d_i) != (lo_human and lo > d_i):
+            if P[SQM] > 0.0 and (hi_human and hi < d_i) != (lo_human and lo > d_i):
                 # squeezed between a human driver who came too close and another
                 # vehicle: the middle of the two bounds (held still, it was touched by the
                 # driver drifting on: a width drop, 60 % CAVs, a CAV between a CAV and a
-                # driver overtaking it at 0.14 m)
+                # driver overtaking it at 0.14 m; ``squeezed_moves_to_middle``)
                 mid = 0.5 * (lo + hi)
                 v_next = min(max(np.sign(mid - d_i) * math.sqrt(a2 * abs(mid - d_i)),
                                  v_lo_e), v_hi_e)

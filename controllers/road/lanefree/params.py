@@ -100,6 +100,14 @@ class LaneFreeParams:
             a 119 s standstill on a user's width step; off by default because with it the
             corridor's checks pass 64 of 65 (a CAV merging from a stop at 70 % CAVs on
             ``corridor`` waited 30.4 s for a gap; bound 30 s).
+        squeezed_moves_to_middle: a CAV squeezed between a human driver inside its
+            clearance (he moved towards it) and another vehicle whose bound it is also
+            inside moves to the middle of the two bounds instead of holding still (on by
+            default: held still, a CAV at a width drop, 60 % CAVs, was touched by a driver
+            who overtook it 0.14 m away and drifted on). Off in the margins arm on TUM's
+            ring (``tum_protocol_tum_margins``): at TUM's margins (T 0.5 s behind humans,
+            TUM's human model) the rule moved CAVs into a driver's follow margin, each then
+            followed the other, and the ring stood at 400 veh/km (docs/results.md).
         row_approach_gain: approach gain k_a (1/s) of a congested CAV about in a row
             (within ``ROW_SLACK_M`` of it) whose window holds no CAV between rows; 0: the
             ``approach_gain`` everywhere (the default). At a time gap equal to the
@@ -198,6 +206,7 @@ class LaneFreeParams:
     human_follow_margin_m: float = 0.0
     mover_skips_followers: bool = False
     human_in_band_follows: bool = False
+    squeezed_moves_to_middle: bool = True
     row_approach_gain: float = 0.0
     yield_decel_mps2: float = 2.0
     window: int = 16
@@ -217,7 +226,8 @@ class LaneFreeParams:
         for name, value in self.__dict__.items():
             if name == "lateral_mode":
                 continue
-            if name in ("mover_skips_followers", "human_in_band_follows"):
+            if name in ("mover_skips_followers", "human_in_band_follows",
+                        "squeezed_moves_to_middle"):
                 if not isinstance(value, bool):
                     raise ParameterError(f"{name} must be true or false, got {value!r}")
                 continue
