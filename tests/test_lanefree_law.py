@@ -444,6 +444,46 @@ def test_a_cav_passing_a_slower_driver_who_turns_towards_it_slows_to_pass_him():
     assert u_long(3.0, -0.3) == pytest.approx(0.0)
 
 
+@pytest.mark.parametrize(("human_ahead_m", "human_v_mps", "cav_v_mps", "goes"), [
+    (0.8, 0.0, 0.0, True),    # the standoff: his rear behind the CAV's rear, both stopped
+    (0.8, 0.5, 0.0, False),   # he moves: he is its leader, as before
+    (0.8, 0.0, 0.5, False),   # the CAV still moves: it stops behind him, as before
+    (1.2, 0.0, 0.0, False),   # his rear ahead of the CAV's: SUMO's driver does not wait for it
+])
+def test_a_stopped_cav_beside_a_stopped_longer_driver_just_ahead_goes_on(
+        human_ahead_m, human_v_mps, cav_v_mps, goes):
+    """TUM's ring with TUM's humans (50 % CAVs, 400 veh/km): a CAV (3.4 m) stood 0.3 m
+    beside a driver (5.2 m) whose centre was 0.8 m ahead of its centre. SUMO's driver
+    took the CAV for his leader (its rear ahead of his, in his 0.8 m sublane, gap
+    negative) and waited for it; the law took him for the CAV's leader (within the 0.35 m
+    follow margin, ahead) and waited for him: both stood from 15 s to the end, and the
+    ring behind them. In that standoff, once it has stood 3 s, the CAV goes on (the
+    passing cap keeps it at most 5 m/s per metre of lateral gap faster than him). A
+    driver who moves stays its leader; one whose rear is ahead of the CAV's (SUMO's
+    follower, free to go) too, and so does one beside a CAV still moving (not yet a
+    standoff: on the width drop, 60 % CAVs, seed 5, a driver stopped beside a CAV for 1 s
+    and went on by himself; going on at once there changed the run, which later stood
+    280 s behind two of SUMO's drivers deadlocked at the taper)."""
+    def obs(v_h, t):
+        return Observation(
+            q=np.array([[0.0, 0.0]]), p=np.array([[cav_v_mps, 0.0]]), t=t, dt=DT,
+            ids=np.array(["c0"], dtype=object), length=np.array([3.4]),
+            width=np.array([1.7]), road_edges=np.array([[-5.1, 5.1]]),
+            road=RoadProfile.constant(10.2, 1e5), desired_speed=np.array([30.0]),
+            others_q=np.array([[human_ahead_m, 0.5 * (1.7 + 1.88) + 0.3]]),
+            others_p=np.array([[v_h, 0.0]]), others_length=np.array([5.2]),
+            others_width=np.array([1.88]), others_ids=np.array(["h0"], dtype=object))
+
+    law = LaneFreeFlocking(LaneFreeParams(), RoadContext(dt=DT))
+    law.compute(obs(1.0, 0.0))  # he has moved: a driver, not a stopped obstacle
+    u_long = [law.compute(obs(human_v_mps, k * DT))[0, 0] for k in range(1, 41)]
+    assert u_long[0] < 0.0  # not at once: the first 3 s it waits for him, as before
+    if goes:
+        assert u_long[-1] > 0.5
+    else:
+        assert u_long[-1] < 0.0
+
+
 def test_a_cav_stuck_behind_a_stopped_car_moves_in_front_of_a_slow_vehicle_behind():
     """A 6 m road; a stopped car ahead on the right (never seen moving) leads the CAV c0;
     the free band beside it is where c1 creeps along 3 m behind c0 at 0.5 m/s. c0 keeps

@@ -90,6 +90,14 @@ OUTSIDE_TOL_M = 0.05
 #: this, m/s: at a standstill the one ahead goes, or both would wait for each other.
 ZIPPER_MOVING_MPS = 1.0
 
+#: A human driver slower than this, and turning slower than this (m/s), who overlaps a CAV
+#: along the road but not across it, his centre ahead of the CAV's and his rear behind its
+#: rear, is no leader of the CAV once it has stood (slower than this) for STANDOFF_S: a
+#: standoff with SUMO's sublane leader rule (see ``interact``). (Not at once: a driver who
+#: stops beside a CAV for a moment mostly goes on by himself.)
+STANDOFF_MPS = 0.1
+STANDOFF_S = 3.0
+
 
 # ------------------------------------------------------------------ helpers
 @njit(cache=True, inline="always")
@@ -362,8 +370,8 @@ def plan(P, rows, frac, lo, hi, current, j, ds, s, d, v, length, width, is_cav, 
 # ------------------------------------------------------------------ interactions
 @njit(cache=True)
 def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targets,
-             urgent, held, lead_gap, lead_v, v_des, edges, has_edges, static, evade_edges,
-             k_a):
+             urgent, held, stood_s, lead_gap, lead_v, v_des, edges, has_edges, static,
+             evade_edges, k_a):
     """Everything of one step that needs the window, per CAV:
 
     * side bounds ``hi``, ``lo`` (N,) m (the law's ``_side``);
@@ -392,7 +400,9 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
       two bounds instead of holding still. A CAV passing a slower human driver ahead of
       it who turns towards it (or is very close beside it) is at most a few m/s faster than
       him, fewer the closer he is (:data:`PASS_DV_PER_M`): were he to turn in, it could
-      still slow down behind him.
+      still slow down behind him. A CAV that has stood for :data:`STANDOFF_S` (``stood_s``
+      (N,) s) does not follow a stopped, longer human driver beside it whose centre is
+      ahead of its centre but whose rear is behind its rear (SUMO's driver waits for it).
       An announced mover still behind a stopped obstacle moves sideways in front of a
       vehicle behind it (a slow CAV whose body is outside the road ahead,
       :data:`OUTSIDE_TOL_M`, in front of a CAV behind it) that is slower than
@@ -428,8 +438,10 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
         hi_human = False  # the bound on that side is a human driver's
         lo_human = False
         u = P[KV] * (v_des[i] - v_i)
+        u_lead = np.inf
         if np.isfinite(lead_gap[i]):
-            u = min(u, _approach(P, lead_gap[i], lead_v[i], v_i, k_a[i]))
+            u_lead = _approach(P, lead_gap[i], lead_v[i], v_i, k_a[i])
+        standoff = False  # its nearest leader is a stopped driver in a standoff (below)
         u_win = np.inf
         u_zip = np.inf
         mover_i = urgent[i]
@@ -525,6 +537,19 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
             closing = -rel_vlat if ddk > 0 else rel_vlat
             lat_future = lat_gap - max(closing, 0.0) * P[ANT]
             is_leader = ahead and (min(lat_gap, lat_future) < P[FM])
+            if (is_leader and not j_cav and g < 0 and lat_gap > 0
+                    and stood_s[i] >= STANDOFF_S and v_j < STANDOFF_MPS
+                    and abs(v_lat[jj]) < STANDOFF_MPS
+                    and x < 0.5 * (length[jj] - l_i)):
+                # a stopped human driver beside it, just ahead of its centre but not of its
+                # back: SUMO's driver takes the CAV (its back ahead of his, in his sublane)
+                # for his leader, at a negative gap, and waits for it; followed here, the
+                # CAV would wait for him, both for good (TUM's ring, TUM's humans, 50 %
+                # CAVs, 400 veh/km: a CAV 0.3 m beside a driver stood from 15 s to the end).
+                # It goes on (the passing cap keeps it slow) and the driver follows it.
+                is_leader = False
+                if abs(g - lead_gap[i]) < 1e-6:
+                    standoff = True
             if is_leader:
                 u_f = _follow(P, g, v_j, accel[jj], j_cav, v_i, P[TG], P[TGH])
                 u_f = min(u_f, _approach(P, g, v_j, v_i, k_a[i]))
@@ -603,6 +628,8 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
                         u_zip = min(u_zip, u_z)
         hi_n[i] = hi
         lo_n[i] = lo
+        if not standoff:
+            u = min(u, u_lead)
         u = min(u, u_win)
         u = min(u, u_zip)
         u_long[i] = u
@@ -803,7 +830,8 @@ def _pull_to_rows(P, target, urgent, s, d, v, v_des, length, width, lo, hi, n, s
 def law_step(P, s, d, v, v_lat, length, width, accel, is_cav, n, order, k_side, periodic,
              period, target0, urgent0, due0, fixed, edges_ahead, evade_ahead, loop_edges,
              has_loop_edges,
-             v_des, static_idx, held, candidate_step_m, hysteresis_mps, queue_hysteresis,
+             v_des, static_idx, held, stood_s, candidate_step_m, hysteresis_mps,
+             queue_hysteresis,
              congested_hysteresis, row_pull, lat_max, reach_lead):
     """The law's step after its inputs (see the law's ``compute``): the road edges of the
     target's look-ahead (``edges_ahead``, never wider than ``loop_edges``; ``evade_ahead``
@@ -920,7 +948,7 @@ def law_step(P, s, d, v, v_lat, length, width, accel, is_cav, n, order, k_side, 
         static[static_idx[q]] = True
     u_long, hi_n, lo_n, u_lat, ask, u_yield, n_asked = interact(
         P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, target, urgent, held,
-        lead_gap, lead_v, v_des, edges, True, static, evade, k_a)
+        stood_s, lead_gap, lead_v, v_des, edges, True, static, evade, k_a)
     u = np.empty((n, 2))
     for i in range(n):
         u[i, 0] = min(max(u_long[i], P[LMIN]), P[LMAX])

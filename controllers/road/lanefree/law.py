@@ -100,6 +100,7 @@ class LaneFreeFlocking:
         self._mem_phase = np.empty(0, np.int64)  # replanning slot
         self._mem_u = np.empty(0)  # last longitudinal command, m/s^2
         self._mem_last = np.empty(0, np.int64)  # call (below) in which it was last present
+        self._mem_stood = np.empty(0)  # how long it has stood (slower than 0.1 m/s), s
         self._calls = 0  # steps with CAVs so far
         self._v_prev: dict = {}  # other id -> last speed, m/s
         self._d_prev: dict = {}  # other id -> last lateral position, m
@@ -183,6 +184,7 @@ class LaneFreeFlocking:
             if obs.desired_speed is not None else np.full(n, 30.0)
         edges, loop_edges, evade_edges = self._band_edges(obs, sc)
         held = self._held(obs, sc, order, periodic, period)
+        stood = self._stood(obs, sc, slots, fresh)
         # primary leader in the current band, searched as far as braking needs
         reach = float(sc.v[:n].max()) ** 2 / (2 * p.comfort_decel_mps2) + 30.0
         (u, u_long, hi_n, lo_n, j, ask, u_yield, n_asked, target, urgent, n_changes,
@@ -191,7 +193,7 @@ class LaneFreeFlocking:
             sc.is_cav, n, order, k_side, periodic, period, target, urgent, due,
             p.lateral_mode == "fixed", edges, evade_edges, loop_edges, loop_edges is not None,
             v_des,
-            _NO_STATIC if sc.n == len(sc.s) else np.flatnonzero(sc.static), held,
+            _NO_STATIC if sc.n == len(sc.s) else np.flatnonzero(sc.static), held, stood,
             float(p.candidate_step_m), float(p.hysteresis_mps),
             float(p.queue_hysteresis), float(p.congested_hysteresis_mps), float(p.row_pull),
             float(self.lat_max), reach)
@@ -244,6 +246,7 @@ class LaneFreeFlocking:
                 self._mem_phase = np.concatenate([self._mem_phase, np.zeros(grow, np.int64)])
                 self._mem_u = np.concatenate([self._mem_u, np.zeros(grow)])
                 self._mem_last = np.concatenate([self._mem_last, np.full(grow, -2, np.int64)])
+                self._mem_stood = np.concatenate([self._mem_stood, np.zeros(grow)])
         slots = np.array(found, dtype=np.intp)
         fresh = self._mem_last[slots] != self._calls - 1
         self._last_ids, self._last_slots = ids, slots
@@ -550,6 +553,16 @@ class LaneFreeFlocking:
         return out
 
     # ------------------------------------------------------------------ memory
+    def _stood(self, obs, sc, slots, fresh) -> np.ndarray:
+        """How long (N,) s each CAV has stood, slower than the standoff speed (kernels'
+        ``STANDOFF_MPS``), up to and including this step (0 when it moves; a CAV afresh
+        starts at one step); kept in the memory."""
+        k = _kernels()
+        prev = np.where(fresh, 0.0, self._mem_stood[slots])
+        stood = np.where(sc.v[:sc.n] < k.STANDOFF_MPS, prev + obs.dt, 0.0)
+        self._mem_stood[slots] = stood
+        return stood
+
     def _remember(self, obs, sc, slots, targets, urgent, u) -> None:
         _kernels().remember(slots, targets, urgent, u, self._calls, self._mem_target,
                             self._mem_urgent, self._mem_u, self._mem_last)
