@@ -5,9 +5,7 @@ left positive), vehicles are rectangles centred at ``(s, d)``.
 
 Rules, applied in this order to CAV ``i`` with command ``u_i``:
 
-1. **Road edges** (lateral): the lateral speed changes by at most ``a_lat dt`` in a step
-   (the actuator limits' bound, applied before this layer in a run; kept here so that
-   rule 2 may count on it for every CAV); the next lateral position keeps the body at
+1. **Road edges** (lateral): the next lateral position keeps the body at
    least ``edge_margin`` inside the road, and the lateral speed towards an
    edge never exceeds ``sqrt(2 a_lat g)`` with ``g`` the remaining distance, so
    the vehicle can always stop laterally before the edge. The edges are the
@@ -18,10 +16,8 @@ Rules, applied in this order to CAV ``i`` with command ``u_i``:
    speed-dependent buffer ahead and behind) bound the next lateral position so
    that the side-to-side clearance stays above ``lateral_clearance`` even if
    the neighbour also moves towards it in the same step (a CAV by up to
-   ``min(|v_lat| + a_lat dt, lat_speed_max) dt``, as rule 1 never changes a CAV's
-   lateral speed by more than ``a_lat dt`` in a step; another vehicle by its current
-   lateral speed times ``dt``); a vehicle never moves sideways into a gap that is
-   already too small.
+   ``lat_speed_max dt``, another vehicle by its current lateral speed times
+   ``dt``); a vehicle never moves sideways into a gap that is already too small.
    **No unsafe cut-ins**: a neighbour also counts as beside, at any distance
    within reach, when sharing a band with it would leave the follower of the
    two (the CAV behind it, or it behind the CAV) faster than the Krauss safe
@@ -30,9 +26,7 @@ Rules, applied in this order to CAV ``i`` with command ``u_i``:
    CAV's band (lateral gap below ``lateral_clearance``) ahead of it, or behind it and able
    to stop behind it, without longitudinal overlap, is a leader or follower, not a side
    neighbour: rule 3 holds the CAV off a leader, and the CAV may move sideways out of the
-   band (e.g. from behind a stopped car). A follower that could not stop but whose body
-   already overlaps the CAV's across the road is no side neighbour either: it is behind
-   the CAV whichever way the CAV moves.
+   band (e.g. from behind a stopped car).
 3. **Safe speed** (longitudinal, Krauss 1998 / SUMO's default model): with
    ``g`` the bumper-to-bumper gap minus ``min_gap`` to the nearest vehicle
    ahead that overlaps laterally anywhere along the lateral move, the next speed

@@ -43,7 +43,7 @@ def apply_kernel(u, cav_index, v_lat, s_all, d_all, v_all, len_all, wid_all, vla
     """
     dt, min_gap, lat_clear, edge_margin, b, bl = C[0], C[1], C[2], C[3], C[4], C[5]
     lsm, cut_in, bt2, mbt, two_b = C[6], C[7], C[8], C[9], C[10]
-    two_la, la_dt = C[11], C[12]
+    two_la, la_dt, shift_cav = C[11], C[12], C[13]
     n = cav_index.shape[0]
     m = s_all.shape[0]
     v_lat_next = np.empty(n)
@@ -55,11 +55,8 @@ def apply_kernel(u, cav_index, v_lat, s_all, d_all, v_all, len_all, wid_all, vla
         s, d, v = s_all[ci], d_all[ci], v_all[ci]
         L, W = len_all[ci], wid_all[ci]
         u0 = u[i, 0]
-        # 1. lateral limits and road edges ----------------------------------------------
-        vl_cmd = min(max(v_lat[i] + u[i, 1] * dt, -lsm), lsm)
-        # at most la_dt from the present lateral speed (the limits layer's bound, kept
-        # here too: rule 2 counts on every CAV's next lateral speed staying within it)
-        vl = min(max(vl_cmd, v_lat[i] - la_dt), v_lat[i] + la_dt)
+        # 1. road edges ----------------------------------------------------------------
+        vl = min(max(v_lat[i] + u[i, 1] * dt, -lsm), lsm)
         lo = edges[i, 0] + 0.5 * W + edge_margin
         hi = edges[i, 1] - 0.5 * W - edge_margin
         cap_left = math.sqrt(two_la * max(hi - d, 0.0))
@@ -74,7 +71,7 @@ def apply_kernel(u, cav_index, v_lat, s_all, d_all, v_all, len_all, wid_all, vla
         d_next = d + vl_edge * dt
         d_next = min(max(d_next, min(lo, d)), max(hi, d))
         vl_edge = (d_next - d) / dt
-        if abs(vl_edge - vl_cmd) > 1e-9:
+        if abs(vl_edge - vl) > 1e-9:
             counts[0] += 1
         # the window of candidates
         if scan_all:
@@ -111,24 +108,14 @@ def apply_kernel(u, cav_index, v_lat, s_all, d_all, v_all, len_all, wid_all, vla
                 beside = True
             half_w = 0.5 * (W + wid_all[j])
             if (beside and abs(dd) < half_w + lat_clear and abs(ds) >= half_l
-                    and (ds > 0 or not unsafe or abs(dd) < half_w)):
+                    and (ds > 0 or not unsafe)):
                 # in one band, one behind the other: a leader (rule 3 holds the CAV off)
                 # or a follower that can stop behind it, not a neighbour at one side (its
                 # side is undefined; a CAV stopped behind a car must be able to move out
-                # from behind it). A follower too close to stop whose body already overlaps
-                # the CAV's across the road is behind it whichever way it moves: no side
-                # neighbour either (TUM's ring, TUM's humans, 10 % CAVs, 400 veh/km: such
-                # drivers, 0.3 m off a CAV's centre 1.4 m behind it, held 10 % of the
-                # CAV-steps still sideways).
+                # from behind it)
                 beside = False
             if beside:
-                # how far it can move towards the CAV in the step: a CAV from its present
-                # lateral speed by at most la_dt more (the bound above), capped at the
-                # lateral speed limit; another vehicle at its present lateral speed
-                if is_cav[j]:
-                    shift = min(abs(vlat_all[j]) + la_dt, lsm) * dt
-                else:
-                    shift = abs(vlat_all[j]) * dt
+                shift = shift_cav if is_cav[j] else abs(vlat_all[j]) * dt
                 need = half_w + lat_clear + shift
                 if dd >= 0:
                     hi_side = min(hi_side, d_all[j] - need)

@@ -42,12 +42,7 @@ stopped taking a vehicle alongside, clear sideways, for a leader (``ALONGSIDE_S`
 law replays written again and the runs recorded again when a CAV squeezed between a human
 driver too close to it and another vehicle started to move to the middle of the two bounds;
 the law replays written again when a CAV passing a slower human driver who turns towards it
-started to cap its speed by the lateral gap (``PASS_*``; the runs did not change); the law
-and safety replays written again (``--parts replay``; the runs did not change) when the
-safety layer's side rule started to allow for a CAV neighbour's reachable lateral move
-(not the lateral speed limit's) and stopped taking an in-band follower too close to stop
-for a side neighbour, and a squeezed CAV stopped moving deeper into a CAV's bound than its
-move allowance.
+started to cap its speed by the lateral gap (``PASS_*``; the runs did not change).
 """
 
 from __future__ import annotations
@@ -259,25 +254,14 @@ def harsh(u: np.ndarray, k: int) -> np.ndarray:
 def replay_safety(steps: list[dict], limits, safety, dt,
                   harsh_cmd: bool = False) -> tuple[list, list, dict]:
     """The safety layer on every stored step (one layer, counts accumulate); with
-    ``harsh_cmd`` on :func:`harsh` commands, every CAV already moving sideways at the
-    lateral speed limit in the direction of its harsh command (the layer changes a lateral
-    speed by at most ``a_lat dt`` a step: from the stored speeds the side rule would
-    hardly act)."""
-    from controllers.layers.safety import RoadState, SafetyConfig, SafetyLayer
+    ``harsh_cmd`` on :func:`harsh` commands."""
+    from controllers.layers.safety import SafetyConfig, SafetyLayer
 
     layer = SafetyLayer(SafetyConfig.for_run(safety, dt, limits))
     us, vls = [], []
     for k, st in enumerate(steps):
-        road = road_state(st)
-        v_lat = st["p"][:, 1]
-        u_in = st["u_box"]
-        if harsh_cmd:
-            u_in = harsh(u_in, k)
-            v_lat = np.sign(u_in[:, 1]) * limits.lat_speed_max_mps
-            all_v_lat = np.zeros(len(road.s)) if road.v_lat is None else road.v_lat.copy()
-            all_v_lat[st["cav_pos"]] = v_lat
-            road = RoadState(road.s, road.d, road.v, road.length, road.width, all_v_lat)
-        u, vl = layer.apply(u_in, st["cav_pos"], v_lat, road,
+        u_in = harsh(st["u_box"], k) if harsh_cmd else st["u_box"]
+        u, vl = layer.apply(u_in, st["cav_pos"], st["p"][:, 1], road_state(st),
                             st["road_edges"], st["period"], st["wall_gap"])
         us.append(np.array(u, dtype=float))
         vls.append(np.array(vl, dtype=float))

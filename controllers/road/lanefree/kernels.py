@@ -437,8 +437,6 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
         lo = -np.inf
         hi_human = False  # the bound on that side is a human driver's
         lo_human = False
-        hi_shift = 0.0  # the allowance for the move of the vehicle bounding that side, m
-        lo_shift = 0.0
         u = P[KV] * (v_des[i] - v_i)
         u_lead = np.inf
         if np.isfinite(lead_gap[i]):
@@ -518,12 +516,10 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
                     if d[jj] - need < hi:
                         hi = d[jj] - need
                         hi_human = not j_cav and not in_band
-                        hi_shift = shift
                 else:
                     if d[jj] + need > lo:
                         lo = d[jj] + need
                         lo_human = not j_cav and not in_band
-                        lo_shift = shift
             side_gap = abs(ddk) - half_w
             if static[jj] and x > 0 and x - half_l < block_reach and side_gap < P[TWOLC]:
                 if ddk > 0:
@@ -683,14 +679,6 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
                 # driver drifting on: a width drop, 60 % CAVs, a CAV between a CAV and a
                 # driver overtaking it at 0.14 m; ``squeezed_moves_to_middle``)
                 mid = 0.5 * (lo + hi)
-                # towards the other side's vehicle it gives up at most the allowance for
-                # that vehicle's move, never the clearance: deeper, it pressed on a CAV
-                # beside that the safety layer held it off every step (TUM's ring, TUM's
-                # humans, 50 % CAVs, 400 veh/km: 3 % of the CAV-steps clipped)
-                if hi_human and hi < d_i:
-                    mid = max(mid, lo - lo_shift)
-                else:
-                    mid = min(mid, hi + hi_shift)
                 v_next = min(max(np.sign(mid - d_i) * math.sqrt(a2 * abs(mid - d_i)),
                                  v_lo_e), v_hi_e)
         u_lat[i] = (v_next - vl_i) / dt

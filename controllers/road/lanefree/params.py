@@ -108,12 +108,10 @@ class LaneFreeParams:
             ring (``tum_protocol_tum_margins``): at TUM's margins (T 0.5 s behind humans,
             TUM's human model) the rule moved CAVs into a driver's follow margin, each then
             followed the other, and the ring stood at 400 veh/km; since the law's standoff
-            rule (``STANDOFF_*`` in kernels.py) it no longer stands there, but with the rule
-            the safety layer acts on 2.7 % of CAV-steps at 50 % CAVs and a CAV collides at
-            90 % (seed 1, 400 veh/km), so the arm keeps it off (with TUM's humans at the
-            default margins the standoff, not this rule, stood the ring at 50 % CAVs;
-            docs/results.md). Towards the vehicle on the other side the CAV goes no deeper
-            than that vehicle's bound plus the allowance for its move.
+            rule (``STANDOFF_*`` in kernels.py) it no longer stands there, but the safety
+            layer acts on 5.1 % of CAV-steps at 50 % CAVs, so the arm keeps it off (with
+            TUM's humans at the default margins the standoff, not this rule, stood the ring
+            at 50 % CAVs; docs/results.md).
         row_approach_gain: approach gain k_a (1/s) of a congested CAV about in a row
             (within ``ROW_SLACK_M`` of it) whose window holds no CAV between rows; 0: the
             ``approach_gain`` everywhere (the default). At a time gap equal to the
