@@ -509,15 +509,37 @@ def test_a_human_driver_behind_in_its_band_is_no_neighbour_at_its_side(follows):
     a human driver in the CAV's band, one behind the other, is a leader or a follower (as
     in the safety layer's rule 2), and one that could not stop keeps his bound but is no
     driver to evade: the CAV holds still beside the other CAV. Off (the default) the CAV
-    still moves towards it, as before."""
+    still evades him, but never towards him nor into the CAV beside it (the middle of the
+    bounds of ``squeezed_moves_to_middle`` is not for a driver behind it): it holds still
+    too (before, +0.15 m/s towards the CAV beside it, which the safety layer held)."""
     law = LaneFreeFlocking(LaneFreeParams(human_in_band_follows=follows), RoadContext(dt=DT))
     obs = _obs([[0.0, -4.02], [0.0, -1.72]], [[3.7, 0.0], [3.7, 0.0]], [30.0, 30.0],
                others_q=[[-6.7, -3.86]], others_p=[[3.6, 0.0]])
     v_lat_next = law.compute(obs)[0, 1] * DT
-    if follows:
-        assert v_lat_next <= 1e-9  # not towards the CAV beside it
+    assert v_lat_next <= 1e-9  # not towards the CAV beside it
+
+
+@pytest.mark.parametrize("gap_m, v_driver_mps, toward", [(0.5, 1.0, False), (0.5, 0.0, True),
+                                                          (12.0, 1.0, True)])
+def test_a_cav_at_the_edge_does_not_move_towards_a_driver_behind_it_who_could_not_stop(
+        gap_m, v_driver_mps, toward):
+    """TUM's ring with TUM's humans, 10 % CAVs, 400 veh/km (seed 1, 2 100-2 400 s): CAVs
+    crawling at the road's edge, 0.17 m from it (inside their 0.2 m edge margin), a driver
+    0-1 m behind in their band, 0.3 m off their centre towards the road's middle. The law
+    evades such a driver; blocked by the edge, the edge margin turned it in towards him
+    at 0.75-1 m/s^2, and the safety layer (rule 2: a driver behind who could not stop)
+    held it every step: 12 % of the CAV-steps clipped. Now the CAV holds still. A driver
+    who stands, or is far enough behind to stop, leaves it free to return inside its
+    margin."""
+    law = LaneFreeFlocking(LaneFreeParams(), RoadContext(dt=DT))
+    d_cav = -5.1 + 0.9 + 0.17  # 0.17 m between its body and the right edge
+    obs = _obs([[0.0, d_cav]], [[0.8, 0.0]], [30.0],
+               others_q=[[-(4.5 + gap_m), d_cav + 0.3]], others_p=[[v_driver_mps, 0.0]])
+    v_lat_next = law.compute(obs)[0, 1] * DT
+    if toward:
+        assert v_lat_next > 0.01
     else:
-        assert v_lat_next > 0.1  # the default: +0.15 m/s towards it
+        assert v_lat_next <= 1e-9
 
 
 def test_a_slow_cav_behind_a_merging_cav_at_its_strips_end_holds_for_its_move():

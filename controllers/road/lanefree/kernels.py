@@ -437,6 +437,8 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
         lo = -np.inf
         hi_human = False  # the bound on that side is a human driver's
         lo_human = False
+        hi_trail = False  # the bound on that side is a vehicle behind it in its band
+        lo_trail = False  # that could not stop behind it
         u = P[KV] * (v_des[i] - v_i)
         u_lead = np.inf
         if np.isfinite(lead_gap[i]):
@@ -511,15 +513,23 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
                 toward = -v_lat[jj] if ddk > 0 else v_lat[jj]
                 shift = max(shift, toward * EVADE_S)
             need = half_w + P[LC] + shift
+            # behind it in its band (the bodies overlap across the road, not along it) and
+            # unable to stop behind it: behind it whichever way it moves sideways; the
+            # safety layer holds the CAV from moving towards him (rule 2), so the law does
+            # not ask it to (below)
+            trail = (not ahead and abs(ddk) < half_w and abs(x) >= half_l
+                     and (cut or (g_pair < 0 and v_follow > 1e-9)))
             if al:
                 if ddk >= 0:
                     if d[jj] - need < hi:
                         hi = d[jj] - need
                         hi_human = not j_cav and not in_band
+                        hi_trail = trail
                 else:
                     if d[jj] + need > lo:
                         lo = d[jj] + need
                         lo_human = not j_cav and not in_band
+                        lo_trail = trail
             side_gap = abs(ddk) - half_w
             if static[jj] and x > 0 and x - half_l < block_reach and side_gap < P[TWOLC]:
                 if ddk > 0:
@@ -666,14 +676,28 @@ def interact(P, j, ds, dd, s, d, v, v_lat, length, width, accel, is_cav, n, targ
             if hi_human and hi < d_i:
                 v_hi_n = max(-min(math.sqrt(a2 * (d_i - hi)), vmax), v_lo_p)
                 v_lo_e = min(v_lo_e, v_lo_p)
+                if hi_trail:
+                    # away from a driver behind it in its band who could not stop, never
+                    # towards him (TUM's ring, TUM's humans, 10 % CAVs, 400 veh/km: CAVs
+                    # at the edge, drivers 0.3 m off their centre 0-1 m behind them; the
+                    # edge margin asked them in towards the driver every step and the
+                    # safety layer held them, 10 % of the CAV-steps)
+                    v_hi_n = min(v_hi_n, 0.0)
             if lo_human and lo > d_i:
                 v_lo_n = min(min(math.sqrt(a2 * (lo - d_i)), vmax), v_hi_p)
                 v_hi_e = max(v_hi_e, v_hi_p)
+                if lo_trail:
+                    v_lo_n = max(v_lo_n, 0.0)
         want = vl_i + ul * dt
         v_next = min(max(min(max(want, v_lo_e), v_hi_e), v_lo_n), v_hi_n)
         if v_lo_n > v_hi_n:
             v_next = 0.0
-            if P[SQM] > 0.0 and (hi_human and hi < d_i) != (lo_human and lo > d_i):
+            in_hi = hi_human and hi < d_i
+            in_lo = lo_human and lo > d_i
+            # (not for a driver behind it in its band: he does not drift onto its side,
+            # and the middle would be towards him or deep into the other side's bound)
+            if (P[SQM] > 0.0 and in_hi != in_lo and not (in_hi and hi_trail)
+                    and not (in_lo and lo_trail)):
                 # squeezed between a human driver who came too close and another
                 # vehicle: the middle of the two bounds (held still, it was touched by the
                 # driver drifting on: a width drop, 60 % CAVs, a CAV between a CAV and a
